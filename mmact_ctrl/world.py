@@ -1,0 +1,64 @@
+"""The small protocol through which the stack knows the world (implemented in ``scenarios``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """Measured robot state at time ``t_s``.
+
+    Attributes:
+        t_s: simulation time, s.
+        q_rad: arm joint positions (7,), rad.
+        dq_rad_s: arm joint velocities (7,), rad/s.
+        gripper_m: gripper opening (sum of both finger joints), m.
+        ee_pos_m: measured TCP position (3,), world frame, m (for metrics; controllers use their own FK).
+    """
+
+    t_s: float
+    q_rad: np.ndarray
+    dq_rad_s: np.ndarray
+    gripper_m: float
+    ee_pos_m: np.ndarray
+
+
+class World(Protocol):
+    """A robot with a moving target: simulated (``scenarios``) or, in principle, real."""
+
+    #: physics step, s.
+    dt_s: float
+    #: the instruction of the current episode ("" if none).
+    instruction: str
+
+    def reset(self, seed: int) -> RobotState:
+        """Start a new episode (robot at home, target motion drawn from ``seed``)."""
+        ...
+
+    def state(self) -> RobotState:
+        """Current measured robot state."""
+        ...
+
+    def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
+        """Apply arm torques (7,) N*m and a gripper opening target (m), advance one ``dt_s``."""
+        ...
+
+    def target_pos_m(self) -> np.ndarray:
+        """Ground-truth position of the instructed target now (what a camera frame shows)."""
+        ...
+
+    def measure_target(self) -> np.ndarray | None:
+        """One perception measurement of the target (noisy), or None when it is missed (dropout)."""
+        ...
+
+    def render(self) -> np.ndarray:
+        """Camera frame(s) ``(V, H, W, 3)`` uint8."""
+        ...
+
+    def target_jump_times_s(self) -> tuple[float, ...]:
+        """Times at which the target teleported this episode (empty unless the motion jumps)."""
+        ...
