@@ -1,0 +1,232 @@
+"""``SimWorld``: the MuJoCo Panda scene with moving target(s), behind ``mmact_ctrl.world.World``.
+
+Kinematic quantities (TCP position, rendered object positions) always refer to the current state:
+after ``mj_step`` MuJoCo's ``xpos`` arrays lag one step behind ``qpos``, so ``state()`` and
+``render()`` refresh them with ``mj_kinematics`` first (a few microseconds; the dynamics are not
+touched, so runs stay deterministic).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from controllers.robot_description import ARM_JOINTS, HOME_Q_RAD  # noqa: E402
+from mmact_ctrl.world import RobotState  # noqa: E402
+from scenarios.panda_scene import (  # noqa: E402
+    GRIPPER_MAX_M,
+    TARGET_COLORS,
+    SceneConfig,
+    arm_actuator_ids,
+    arm_dof_adr,
+    arm_qpos_adr,
+    build_panda_model,
+    finger_qpos_adr,
+    gripper_actuator_id,
+    home_tcp_pos_m,
+    target_mocap_ids,
+    tcp_site_id,
+)
+from scenarios.targets import TargetMotion, TargetSpec, make_motion  # noqa: E402
+
+#: instruction templates; ``{color}`` is the colour of the instructed object.
+INSTRUCTION_TEMPLATES: tuple[str, ...] = (
+    "reach the {color} ball",
+    "move the gripper to the {color} ball",
+    "go to the {color} sphere",
+    "touch the {color} ball",
+)
+#: minimum initial distance between two objects, m.
+MIN_OBJECT_SEPARATION_M = 0.15
+
+
+class SimWorld:
+    """A simulated Panda on a table with one or two moving target spheres.
+
+    Implements ``mmact_ctrl.world.World``. Extra attributes: ``model``/``data`` (MuJoCo),
+    ``target_index`` (which object is instructed), ``n_objects``; extra methods:
+    ``objects_pos_m()``, ``close()``.
+
+    Args:
+        scene: what the scene contains (step, armature, objects, cameras).
+        target: how every object moves (each object draws its own motion).
+        noise_m: std of the per-axis Gaussian noise of ``measure_target``, m.
+        dropout: probability that ``measure_target`` returns None.
+    """
+
+    def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0) -> None:
+        if not isinstance(scene, SceneConfig):
+            raise TypeError(f"scene must be a SceneConfig, got {type(scene).__name__}")
+        if not isinstance(target, TargetSpec):
+            raise TypeError(f"target must be a TargetSpec, got {type(target).__name__}")
+        if not (np.isfinite(noise_m) and noise_m >= 0):
+            raise ValueError(f"noise_m must be finite and >= 0 m, got {noise_m!r}")
+        if not (0.0 <= dropout < 1.0):
+            raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+        self.scene = scene
+        self.target = target
+        self.noise_m = float(noise_m)
+        self.dropout = float(dropout)
+        self.dt_s: float = scene.dt_s
+        self.instruction: str = ""
+        self.n_objects: int = scene.n_objects
+        self.target_index: int = 0
+
+        self.model = build_panda_model(scene)
+        self.data = mujoco.MjData(self.model)
+        self._arm_qpos = arm_qpos_adr(self.model)
+        self._arm_dof = arm_dof_adr(self.model)
+        self._finger_qpos = finger_qpos_adr(self.model)
+        self._arm_act = arm_actuator_ids(self.model)
+        self._grip_act = gripper_actuator_id(self.model)
+        self._tcp = tcp_site_id(self.model)
+        self._mocap = target_mocap_ids(self.model)
+        self._motions: list[TargetMotion] = []
+        self._meas_rng: np.random.Generator | None = None
+        self._renderer: mujoco.Renderer | None = None
+        self._kinematics_stale = True
+
+    # ---------------------------------------------------------------- episode
+
+    def reset(self, seed: int, target_index: int | None = None) -> RobotState:
+        """New episode: arm at ``HOME_Q_RAD`` at rest, fingers open (0.08 m), motions drawn from ``seed``.
+
+        Object 0 moves as ``make_motion(target, seed)``; with two objects, object 1 gets an
+        independent motion that starts at least ``MIN_OBJECT_SEPARATION_M`` away. ``target_index``
+        picks the instructed object (None: random from ``seed``).
+        """
+        if target_index is not None and not (0 <= target_index < self.n_objects):
+            raise ValueError(f"target_index must be in [0, {self.n_objects}) or None, got {target_index!r}")
+        rng = np.random.default_rng([int(seed), 0])
+        motions: list[TargetMotion] = [make_motion(self.target, int(seed))]
+        if self.n_objects == 2:
+            start0 = motions[0].pos_m(0.0)
+            for _ in range(1000):
+                other = make_motion(self.target, int(rng.integers(2**62)))
+                if np.linalg.norm(other.pos_m(0.0) - start0) >= MIN_OBJECT_SEPARATION_M:
+                    break
+            else:  # pragma: no cover - the workspace is far larger than the separation
+                raise RuntimeError(f"could not place two objects {MIN_OBJECT_SEPARATION_M} m apart (seed {seed})")
+            motions.append(other)
+        self._motions = motions
+        self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
+        template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
+        self.instruction = template.format(color=TARGET_COLORS[self.target_index])
+        self._meas_rng = np.random.default_rng([int(seed), 1])
+
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        d.qpos[self._arm_qpos] = HOME_Q_RAD
+        d.qpos[self._finger_qpos] = GRIPPER_MAX_M / 2.0
+        d.ctrl[self._grip_act] = GRIPPER_MAX_M
+        self._place_objects(0.0)
+        mujoco.mj_forward(m, d)
+        self._kinematics_stale = False
+        return self.state()
+
+    def _require_reset(self) -> None:
+        if not self._motions:
+            raise RuntimeError("SimWorld: call reset(seed) before using the world")
+
+    def _place_objects(self, t_s: float) -> None:
+        for mocap_id, motion in zip(self._mocap, self._motions):
+            self.data.mocap_pos[mocap_id] = motion.pos_m(t_s)
+
+    def _refresh_kinematics(self) -> None:
+        if self._kinematics_stale:
+            mujoco.mj_kinematics(self.model, self.data)
+            self._kinematics_stale = False
+
+    # ---------------------------------------------------------------- World protocol
+
+    def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
+        """Apply arm torques (7,) N*m (clipped to the effort limits by the actuators) and a gripper
+        opening target (m, clipped to [0, 0.08]); advance one ``dt_s``; move the objects."""
+        self._require_reset()
+        tau = np.asarray(tau_nm, dtype=np.float64)
+        if tau.shape != (len(ARM_JOINTS),):
+            raise ValueError(f"tau_nm must have shape ({len(ARM_JOINTS)},), got {tau.shape}")
+        if not np.all(np.isfinite(tau)) or not np.isfinite(gripper_m):
+            raise ValueError(f"non-finite command: tau_nm={tau.tolist()}, gripper_m={gripper_m!r}")
+        d = self.data
+        d.ctrl[self._arm_act] = tau
+        d.ctrl[self._grip_act] = gripper_m
+        mujoco.mj_step(self.model, d)
+        self._place_objects(d.time)
+        self._kinematics_stale = True
+
+    def state(self) -> RobotState:
+        """Current time, arm joints, gripper opening (sum of both fingers) and TCP position."""
+        self._require_reset()
+        self._refresh_kinematics()
+        d = self.data
+        return RobotState(
+            t_s=float(d.time),
+            q_rad=d.qpos[self._arm_qpos].copy(),
+            dq_rad_s=d.qvel[self._arm_dof].copy(),
+            gripper_m=float(d.qpos[self._finger_qpos].sum()),
+            ee_pos_m=d.site_xpos[self._tcp].copy(),
+        )
+
+    def target_pos_m(self) -> np.ndarray:
+        """Ground-truth position (3,) of the instructed object now, m."""
+        self._require_reset()
+        return self._motions[self.target_index].pos_m(self.data.time)
+
+    def objects_pos_m(self) -> np.ndarray:
+        """Positions (n_objects, 3) of all objects now, m (row ``target_index`` is the instructed one)."""
+        self._require_reset()
+        return np.stack([motion.pos_m(self.data.time) for motion in self._motions])
+
+    def measure_target(self) -> np.ndarray | None:
+        """Truth + N(0, noise_m^2) per axis, or None with probability ``dropout``."""
+        self._require_reset()
+        missed = self._meas_rng.uniform() < self.dropout
+        noise = self._meas_rng.normal(0.0, self.noise_m, size=3)
+        return None if missed else self.target_pos_m() + noise
+
+    def render(self) -> np.ndarray:
+        """Frames ``(V, H, W, 3)`` uint8 of ``scene.camera_names``."""
+        self._require_reset()
+        if self._renderer is None:
+            size = int(self.scene.image_size_px)
+            try:
+                self._renderer = mujoco.Renderer(self.model, height=size, width=size)
+            except Exception as exc:  # noqa: BLE001 - GL backends raise assorted errors
+                raise RuntimeError(f"cannot create a MuJoCo renderer with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}: "
+                                   f"{exc}. MUJOCO_GL is read when mujoco is first imported: set it (egl for headless) or import "
+                                   f"scenarios.sim_world before anything imports mujoco") from exc
+        self._refresh_kinematics()
+        mujoco.mj_camlight(self.model, self.data)
+        frames = []
+        for name in self.scene.camera_names:
+            self._renderer.update_scene(self.data, camera=name)
+            frames.append(self._renderer.render())
+        return np.stack(frames)
+
+    def target_jump_times_s(self) -> tuple[float, ...]:
+        """Times (s) at which the instructed object teleports this episode."""
+        self._require_reset()
+        return tuple(self._motions[self.target_index].jump_times_s)
+
+    # ---------------------------------------------------------------- extras
+
+    def home_tcp_pos_m(self) -> np.ndarray:
+        """TCP position (3,) at ``HOME_Q_RAD`` with the gripper open, m."""
+        return home_tcp_pos_m(self.model)
+
+    def close(self) -> None:
+        """Free the renderer (the world stays usable; a later ``render`` makes a new one)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self) -> "SimWorld":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
