@@ -1,0 +1,77 @@
+"""Chunk retargeting: correct the active chunk's positions for what the policy could not see.
+
+Two rules, both evaluated at the time ``t_s`` a reference is needed (so they keep working
+past the chunk's last waypoint, where the last waypoint is held):
+
+- ``displacement``: shift by how far the estimated target has moved since the chunk's
+  observation time: ``offset(t) = p_hat(t) - p_hat(t0)``.
+- ``snap``: pull the chunk toward the filtered target, blended from 0 at the chunk's
+  activation to 1 at its last waypoint: ``offset(t) = alpha(t) * (p_hat(t) - aim)``,
+  where ``aim`` is the chunk's last waypoint. This also removes the chunk source's aim
+  error and the dequantization error.
+
+Both are gated by a trust radius: when the target estimate at the chunk's observation time
+is farther than ``trust_radius_m`` from the chunk's aim, the target is not the chunk's
+target, and the chunk runs unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+RULES: tuple[str, ...] = ("none", "displacement", "snap")
+
+
+@dataclass(frozen=True)
+class RetargetConfig:
+    """Attributes:
+    rule: one of ``RULES``.
+    trust_radius_m: gate on the distance between the chunk's aim and the target at observation time, m.
+    """
+
+    rule: str = "displacement"
+    trust_radius_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.rule not in RULES:
+            raise ValueError(f"retarget rule must be one of {RULES}, got {self.rule!r}")
+        if not self.trust_radius_m > 0:
+            raise ValueError(f"trust_radius_m must be > 0, got {self.trust_radius_m}")
+
+
+def trusted(config: RetargetConfig, aim_pos_m: np.ndarray, target_at_obs_m: np.ndarray | None) -> bool:
+    """Whether the tracked target is this chunk's target (inside the trust radius of its aim)."""
+    if config.rule == "none" or target_at_obs_m is None:
+        return False
+    return bool(np.linalg.norm(aim_pos_m - target_at_obs_m) <= config.trust_radius_m)
+
+
+def retarget_offset(
+    config: RetargetConfig,
+    t_s: float,
+    aim_pos_m: np.ndarray,
+    target_at_obs_m: np.ndarray,
+    target_pos_m: np.ndarray,
+    target_vel_m_s: np.ndarray,
+    t_active_s: float,
+    t_last_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(offset m, offset velocity m/s) to add to the chunk's position reference at ``t_s``.
+
+    Args:
+        aim_pos_m: the chunk's last waypoint position.
+        target_at_obs_m: filtered target estimate at the chunk's observation time.
+        target_pos_m, target_vel_m_s: filtered target estimate (predicted) at ``t_s``.
+        t_active_s: when the chunk became active; t_last_s: time of its last waypoint.
+    """
+    if config.rule == "displacement":
+        return target_pos_m - target_at_obs_m, target_vel_m_s
+    if config.rule == "snap":
+        span = max(t_last_s - t_active_s, 1e-6)
+        alpha = min(max((t_s - t_active_s) / span, 0.0), 1.0)
+        dalpha = 1.0 / span if 0.0 < alpha < 1.0 else 0.0
+        gap = target_pos_m - aim_pos_m
+        return alpha * gap, alpha * target_vel_m_s + dalpha * gap
+    return np.zeros(3), np.zeros(3)

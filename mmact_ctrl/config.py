@@ -1,0 +1,68 @@
+"""Configuration of the hybrid stack: every layer and every time scale is a switch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from controllers.qp_id import QPConfig
+from controllers.retarget import RetargetConfig
+from controllers.smoother import SmootherConfig
+from controllers.target_filter import FilterConfig
+
+MODES: tuple[str, ...] = ("open_loop", "hybrid")
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    """How chunks are executed.
+
+    Attributes:
+        mode: ``open_loop`` (dequantized waypoints interpolated and tracked by the QP, nothing else)
+            or ``hybrid`` (retargeting + Ruckig + QP).
+        use_ruckig: hybrid only: smooth the reference with Ruckig.
+        retarget: hybrid only: the retargeting rule and trust radius.
+        replan_hz: how often the chunk source is queried, Hz.
+        latency_ms: inference latency: a chunk observed at t0 becomes active at t0 + latency.
+        bins: action bins of the tokenizer (0 = no quantization).
+        dt_s: physics and control period, s.
+        perception_hz: target measurement rate, Hz.
+        duration_s: episode length, s.
+    """
+
+    mode: str = "hybrid"
+    use_ruckig: bool = True
+    retarget: RetargetConfig = field(default_factory=RetargetConfig)
+    replan_hz: float = 1.0
+    latency_ms: float = 200.0
+    bins: int = 2048
+    dt_s: float = 0.001
+    perception_hz: float = 100.0
+    duration_s: float = 6.0
+    qp: QPConfig = field(default_factory=QPConfig)
+    smoother: SmootherConfig = field(default_factory=SmootherConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        if not self.replan_hz > 0:
+            raise ValueError(f"replan_hz must be > 0, got {self.replan_hz}")
+        if not self.latency_ms >= 0:
+            raise ValueError(f"latency_ms must be >= 0, got {self.latency_ms}")
+        if not isinstance(self.bins, int) or self.bins < 0 or self.bins == 1:
+            raise ValueError(f"bins must be 0 (no quantization) or an int >= 2, got {self.bins!r}")
+        if not self.dt_s > 0:
+            raise ValueError(f"dt_s must be > 0, got {self.dt_s}")
+        if not self.perception_hz > 0 or self.perception_hz > 1.0 / self.dt_s + 1e-9:
+            raise ValueError(f"perception_hz must be in (0, {1.0 / self.dt_s:g}], got {self.perception_hz}")
+        if not self.duration_s > 0:
+            raise ValueError(f"duration_s must be > 0, got {self.duration_s}")
+        if self.latency_ms / 1000.0 >= self.duration_s:
+            raise ValueError(
+                f"latency_ms={self.latency_ms:g} is not shorter than the episode ({self.duration_s:g} s): no chunk would ever run"
+            )
+
+    @property
+    def perception_every(self) -> int:
+        """Physics steps per perception tick."""
+        return max(1, int(round(1.0 / (self.perception_hz * self.dt_s))))

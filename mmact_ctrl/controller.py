@@ -1,0 +1,123 @@
+"""The 1 kHz control layer under the chunk source: reference -> (retarget) -> (Ruckig) -> QP -> torques."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from controllers.qp_id import TaskReference, TaskSpaceQP
+from controllers.retarget import retarget_offset, trusted
+from controllers.robot_model import PandaModel, RobotTerms
+from controllers.rotations import rot_from_rotvec, rotvec_from_rot
+from controllers.smoother import TaskSpaceSmoother
+from controllers.target_filter import TargetFilter
+from mmact_ctrl.chunk import ActionChunk
+from mmact_ctrl.config import StackConfig
+from mmact_ctrl.reference import ChunkReference
+
+GRIPPER_OPEN_M = 0.08
+
+
+@dataclass
+class TickOutput:
+    """What one control tick produced (for logging)."""
+
+    tau_nm: np.ndarray
+    gripper_m: float
+    ref_pos_m: np.ndarray
+    ee_pos_m: np.ndarray
+
+
+class HybridController:
+    """Executes chunks at the control rate with the layers the ``StackConfig`` switches on."""
+
+    def __init__(self, config: StackConfig, model: PandaModel | None = None) -> None:
+        self.config = config
+        self.model = model if model is not None else PandaModel()
+        self.qp = TaskSpaceQP(replace(config.qp, dt_s=config.dt_s))
+        self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=config.dt_s))
+        self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
+        self.hybrid = config.mode == "hybrid"
+        self.q_post = self.model.home_q_rad
+        _, self.rot_nominal = self.model.fk(self.q_post)
+        self.active: ChunkReference | None = None
+        self._trusted = False
+        self._hold_pos = np.zeros(3)
+        self._hold_rotvec = np.zeros(3)
+        self.terms: RobotTerms | None = None
+
+    # ---- episode -----------------------------------------------------------
+    def reset(self, q_rad: np.ndarray) -> None:
+        """New episode: hold the current pose until the first chunk is active."""
+        pos, rot = self.model.fk(np.asarray(q_rad, dtype=float))
+        self._hold_pos = pos
+        self._hold_rotvec = rotvec_from_rot(rot, self.rot_nominal)
+        self.smoother.reset(pos, self._hold_rotvec)
+        self.filter = TargetFilter(self.filter.config)
+        self.qp.failures = 0
+        self.qp.solves = 0
+        self.active = None
+        self._trusted = False
+
+    def ee_pose(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """TCP position (m) and rotation vector relative to the nominal grasp (rad) at ``q``."""
+        pos, rot = self.model.fk(q_rad)
+        return pos, rotvec_from_rot(rot, self.rot_nominal)
+
+    # ---- inputs at their own rates -------------------------------------------
+    def perceive(self, t_s: float, z_m: np.ndarray | None) -> None:
+        """Perception tick (100 Hz): fuse one target measurement (None = missed)."""
+        if self.hybrid:
+            self.filter.step(t_s, z_m)
+
+    def target_estimate(self) -> np.ndarray | None:
+        """Current filtered target estimate (None before the first measurement)."""
+        return self.filter.pos_m if self.filter.initialized else None
+
+    def activate(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> None:
+        """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency)."""
+        self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
+        self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
+
+    # ---- the 1 kHz tick ------------------------------------------------------------
+    def reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing."""
+        if self.active is None:
+            return self._hold_pos, np.zeros(3), self._hold_rotvec, np.zeros(3), GRIPPER_OPEN_M
+        action, rate = self.active.sample(t_s)
+        pos, vel = action[:3], rate[:3]
+        if self._trusted and self.filter.initialized:
+            offset, offset_vel = retarget_offset(
+                self.config.retarget,
+                t_s,
+                self.active.aim_pos_m,
+                self.active.target_at_obs_m,
+                self.filter.predict_pos(t_s),
+                self.filter.vel_m_s,
+                self.active.t_active_s,
+                self.active.t_last_s,
+            )
+            pos, vel = pos + offset, vel + offset_vel
+        return pos, vel, action[3:6], rate[3:6], float(action[6])
+
+    def tick(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
+        """One control period: torques for the measured joint state."""
+        terms = self.model.terms(q_rad, dq_rad_s)
+        self.terms = terms
+        pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
+        if self.hybrid and self.config.use_ruckig:
+            pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
+        else:
+            acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)
+        ref = TaskReference(
+            pos_m=pos,
+            vel_m_s=vel,
+            acc_m_s2=acc,
+            rot=rot_from_rotvec(rotvec, self.rot_nominal),
+            ang_vel_rad_s=ang_vel,
+            ang_acc_rad_s2=ang_acc,
+            q_post_rad=self.q_post,
+        )
+        tau = self.qp.solve(terms, q_rad, dq_rad_s, ref)
+        return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=pos, ee_pos_m=terms.pos_m)

@@ -1,0 +1,143 @@
+"""The multi-rate loop: physics and control at 1 kHz, perception at 100 Hz, the chunk source at ``replan_hz``.
+
+The observation is taken at ``t0``; the chunk it produces becomes active at ``t0 + latency``
+while the previous chunk keeps running. Waypoints already in the past when a chunk arrives
+are skipped (the reference is indexed by absolute time).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mmact_ctrl.chunk import ActionChunk, ChunkSource, Observation
+from mmact_ctrl.controller import HybridController
+from mmact_ctrl.world import World
+
+
+@dataclass
+class EpisodeLog:
+    """Everything recorded in one episode (arrays sampled every control period)."""
+
+    seed: int
+    t_s: np.ndarray
+    ee_pos_m: np.ndarray
+    target_pos_m: np.ndarray
+    ref_pos_m: np.ndarray
+    q_rad: np.ndarray
+    dq_rad_s: np.ndarray
+    tau_cmd_nm: np.ndarray
+    tick_us: np.ndarray
+    chunk_active_s: list[float] = field(default_factory=list)
+    plan_ms: list[float] = field(default_factory=list)
+    jump_times_s: tuple[float, ...] = ()
+    qp_failures: int = 0
+    smoother_failures: int = 0
+    clipped_actions: int = 0
+    wall_s: float = 0.0
+    instruction: str = ""
+    frames: list[np.ndarray] = field(default_factory=list)
+
+
+def observe(world: World, controller: HybridController, t_s: float, with_image: bool) -> Observation:
+    """What a chunk source sees at ``t_s``: robot state, one frame's worth of target, pixels if needed."""
+    state = world.state()
+    ee_pos, ee_rotvec = controller.ee_pose(state.q_rad)
+    return Observation(
+        t0_s=t_s,
+        q_rad=state.q_rad.copy(),
+        dq_rad_s=state.dq_rad_s.copy(),
+        ee_pos_m=ee_pos,
+        ee_rotvec_rad=ee_rotvec,
+        gripper_m=state.gripper_m,
+        target_pos_m=world.target_pos_m().copy(),
+        image=world.render() if with_image else None,
+        instruction=world.instruction,
+    )
+
+
+def run_episode(
+    world: World,
+    source: ChunkSource,
+    controller: HybridController,
+    seed: int,
+    video_fps: float = 0.0,
+    progress=None,
+) -> EpisodeLog:
+    """Run one episode of ``controller.config.duration_s`` and return its log.
+
+    Args:
+        video_fps: when > 0, render camera frames at this rate into ``EpisodeLog.frames``.
+        progress: optional callable(fraction) for progress reporting.
+    """
+    cfg = controller.config
+    dt = cfg.dt_s
+    n = int(round(cfg.duration_s / dt))
+    state = world.reset(seed)
+    controller.reset(state.q_rad)
+    latency_s = cfg.latency_ms / 1000.0
+    replan_period_s = 1.0 / cfg.replan_hz
+    eps = 0.5 * dt
+
+    log = EpisodeLog(
+        seed=seed,
+        t_s=np.arange(n) * dt,
+        ee_pos_m=np.empty((n, 3)),
+        target_pos_m=np.empty((n, 3)),
+        ref_pos_m=np.empty((n, 3)),
+        q_rad=np.empty((n, 7)),
+        dq_rad_s=np.empty((n, 7)),
+        tau_cmd_nm=np.empty((n, 7)),
+        tick_us=np.empty(n),
+        instruction=world.instruction,
+    )
+    pending: deque[tuple[float, ActionChunk, np.ndarray | None]] = deque()
+    next_plan_s = 0.0
+    frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
+    perception_every = cfg.perception_every
+    wall0 = time.perf_counter()
+    for k in range(n):
+        t = k * dt
+        state = world.state()
+        perceive = k % perception_every == 0
+        z = world.measure_target() if perceive else None
+        if perceive:  # fuse before planning so a chunk observed now records the estimate of now
+            tick0 = time.perf_counter()
+            controller.perceive(t, z)
+            perception_us = (time.perf_counter() - tick0) * 1e6
+        else:
+            perception_us = 0.0
+        if t >= next_plan_s - eps:
+            obs = observe(world, controller, t, with_image=source.needs_image)
+            p0 = time.perf_counter()
+            chunk = source.plan(obs)
+            log.plan_ms.append((time.perf_counter() - p0) * 1e3)
+            log.clipped_actions += chunk.n_clipped
+            pending.append((t + latency_s, chunk, controller.target_estimate()))
+            next_plan_s += replan_period_s
+        tick0 = time.perf_counter()
+        while pending and pending[0][0] <= t + eps:
+            t_act, chunk, target_at_obs = pending.popleft()
+            controller.activate(chunk, t, target_at_obs)
+            log.chunk_active_s.append(t)
+        out = controller.tick(t, state.q_rad, state.dq_rad_s)
+        log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + perception_us
+        log.ee_pos_m[k] = state.ee_pos_m
+        log.target_pos_m[k] = world.target_pos_m()
+        log.ref_pos_m[k] = out.ref_pos_m
+        log.q_rad[k] = state.q_rad
+        log.dq_rad_s[k] = state.dq_rad_s
+        log.tau_cmd_nm[k] = out.tau_nm
+        if frame_every and k % frame_every == 0:
+            log.frames.append(world.render()[0])
+        world.step(out.tau_nm, out.gripper_m)
+        if progress is not None and k % 500 == 0:
+            progress(k / n)
+    log.wall_s = time.perf_counter() - wall0
+    log.qp_failures = controller.qp.failures
+    log.smoother_failures = controller.smoother.failures
+    log.jump_times_s = tuple(world.target_jump_times_s())
+    return log

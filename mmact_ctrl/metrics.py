@@ -1,0 +1,138 @@
+"""Episode and summary metrics, defined once and used everywhere.
+
+- success: the TCP within ``success_radius_m`` (3 cm) of the target centre for at least
+  ``success_hold_s`` (0.3 s) of continuous time.
+- time_to_reach_s: start of the first such window (NaN if never).
+- final_error_m: TCP-target distance at the last sample.
+- tracking_ratio: fraction of the episode's samples with the TCP within the success radius.
+- jerk_rms: RMS of the TCP jerk (m/s^3), from the measured TCP position resampled at
+  ``jerk_rate_hz`` (100 Hz: the jerk of the motion, not of the 1 kHz torque steps).
+- limit_violations: control ticks with a measured joint position outside its limits, a measured
+  joint velocity above its limit, or a commanded torque above the effort limit (before any clipping).
+- chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
+- jump recovery: for each target teleport, whether the TCP got within the success radius of the
+  new goal within ``jump_window_s`` (1 s), and how long it took.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.robot_description import JointLimits
+from mmact_ctrl.loop import EpisodeLog
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    success_radius_m: float = 0.03
+    success_hold_s: float = 0.3
+    jerk_rate_hz: float = 100.0
+    jump_window_s: float = 1.0
+    limit_tol: float = 1e-6
+
+
+def _first_hold_start(inside: np.ndarray, hold_n: int) -> int | None:
+    """Index where the first run of ``hold_n`` consecutive True values starts."""
+    run = 0
+    for i, v in enumerate(inside):
+        run = run + 1 if v else 0
+        if run >= hold_n:
+            return i - hold_n + 1
+    return None
+
+
+def limit_violation_mask(log: EpisodeLog, limits: JointLimits = JointLimits(), tol: float = 1e-6) -> np.ndarray:
+    """Per-tick bool: any joint position, velocity or commanded torque beyond its limit."""
+    lim = limits.arrays()
+    pos = (log.q_rad < lim["q_min_rad"] - tol) | (log.q_rad > lim["q_max_rad"] + tol)
+    vel = np.abs(log.dq_rad_s) > lim["v_max_rad_s"] + tol
+    tau = np.abs(log.tau_cmd_nm) > lim["tau_max_nm"] + tol
+    return np.any(pos | vel | tau, axis=1)
+
+
+def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
+    """The per-episode figures (JSON-ready floats and ints)."""
+    dt = float(log.t_s[1] - log.t_s[0]) if len(log.t_s) > 1 else 1e-3
+    err = np.linalg.norm(log.ee_pos_m - log.target_pos_m, axis=1)
+    inside = err < config.success_radius_m
+    hold_n = max(1, int(round(config.success_hold_s / dt)))
+    start = _first_hold_start(inside, hold_n)
+    # jerk of the motion, at jerk_rate_hz
+    stride = max(1, int(round(1.0 / (config.jerk_rate_hz * dt))))
+    p = log.ee_pos_m[::stride]
+    h = stride * dt
+    jerk = np.diff(p, n=3, axis=0) / h**3 if len(p) > 3 else np.zeros((1, 3))
+    acc = np.diff(p, n=2, axis=0) / h**2 if len(p) > 2 else np.zeros((1, 3))
+    acc_n = np.linalg.norm(acc, axis=1)
+    switch_acc = []
+    for ts in log.chunk_active_s[1:]:
+        i = int(round(ts / h))
+        lo, hi = max(0, i - 5), min(len(acc_n), i + 5)
+        if hi > lo:
+            switch_acc.append(float(acc_n[lo:hi].max()))
+    violations = limit_violation_mask(log, tol=config.limit_tol)
+    recovered, recovery_s = [], []
+    for tj in log.jump_times_s:
+        j0 = int(np.ceil(tj / dt)) + 1
+        j1 = min(len(err), j0 + int(round(config.jump_window_s / dt)))
+        if j0 >= len(err):
+            continue
+        hit = np.flatnonzero(inside[j0:j1])
+        recovered.append(bool(hit.size))
+        if hit.size:
+            recovery_s.append(float(hit[0] * dt))
+    sim_s = float(len(log.t_s) * dt)
+    return {
+        "seed": int(log.seed),
+        "instruction": log.instruction,
+        "success": start is not None,
+        "time_to_reach_s": float(start * dt) if start is not None else float("nan"),
+        "final_error_m": float(err[-1]),
+        "mean_error_m": float(err.mean()),
+        "tracking_ratio": float(inside.mean()),
+        "jerk_rms": float(np.sqrt(np.mean(np.sum(jerk**2, axis=1)))),
+        "chunk_jump_acc_m_s2": float(max(switch_acc)) if switch_acc else 0.0,
+        "limit_violations": int(violations.sum()),
+        "qp_failures": int(log.qp_failures),
+        "smoother_failures": int(log.smoother_failures),
+        "clipped_actions": int(log.clipped_actions),
+        "tick_us_median": float(np.median(log.tick_us)),
+        "tick_us_p99": float(np.percentile(log.tick_us, 99)),
+        "plan_ms_median": float(np.median(log.plan_ms)) if log.plan_ms else float("nan"),
+        "realtime_factor": sim_s / log.wall_s if log.wall_s > 0 else float("nan"),
+        "n_jumps": len(recovered),
+        "jumps_recovered": int(sum(recovered)),
+        "jump_recovery_s": recovery_s,
+    }
+
+
+def _nanmedian(values: list[float]) -> float:
+    v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
+    return float(np.median(v)) if v.size else float("nan")
+
+
+def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
+    """Summary over episodes; ``tick_us`` pools the controller tick times of all episodes."""
+    if not episodes:
+        raise ValueError("summarize needs at least one episode")
+    n_jumps = sum(e["n_jumps"] for e in episodes)
+    recovery = [s for e in episodes for s in e["jump_recovery_s"]]
+    return {
+        "episodes": len(episodes),
+        "success_rate": float(np.mean([e["success"] for e in episodes])),
+        "final_error_m": float(np.mean([e["final_error_m"] for e in episodes])),
+        "mean_error_m": float(np.mean([e["mean_error_m"] for e in episodes])),
+        "time_to_reach_s": _nanmedian([e["time_to_reach_s"] for e in episodes]),
+        "tracking_ratio": float(np.mean([e["tracking_ratio"] for e in episodes])),
+        "jerk_rms": float(np.mean([e["jerk_rms"] for e in episodes])),
+        "chunk_jump_acc_m_s2": float(np.mean([e["chunk_jump_acc_m_s2"] for e in episodes])),
+        "limit_violations": int(sum(e["limit_violations"] for e in episodes)),
+        "qp_failures": int(sum(e["qp_failures"] for e in episodes)),
+        "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),
+        "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
+        "realtime_factor": float(np.mean([e["realtime_factor"] for e in episodes])),
+        "jump_recovered_rate": float(sum(e["jumps_recovered"] for e in episodes) / n_jumps) if n_jumps else float("nan"),
+        "jump_recovery_s": _nanmedian(recovery),
+    }

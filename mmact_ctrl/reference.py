@@ -1,0 +1,51 @@
+"""The active chunk as a time-indexed reference (piecewise-linear between waypoints)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mmact_ctrl.chunk import ActionChunk
+
+
+@dataclass(frozen=True)
+class ChunkReference:
+    """A chunk once it is active.
+
+    Attributes:
+        chunk: the chunk.
+        t_active_s: when it became active (observation time + latency), s.
+        target_at_obs_m: filtered target estimate at the chunk's observation time (None if no estimate yet).
+    """
+
+    chunk: ActionChunk
+    t_active_s: float
+    target_at_obs_m: np.ndarray | None
+
+    @property
+    def aim_pos_m(self) -> np.ndarray:
+        """Where the chunk aims: its last waypoint's position."""
+        return self.chunk.waypoints[-1, :3]
+
+    @property
+    def t_last_s(self) -> float:
+        return float(self.chunk.times_s[-1])
+
+    def sample(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(action (7,), action rate (7,) per s) at ``t_s``.
+
+        Linear interpolation between waypoints; the first waypoint is held before its time
+        and the last after its time (zero rate). Waypoints already past are skipped implicitly.
+        """
+        w = self.chunk.waypoints
+        times = self.chunk.times_s
+        if t_s <= times[0]:
+            return w[0], np.zeros(7)
+        if t_s >= times[-1]:
+            return w[-1], np.zeros(7)
+        i = int(np.searchsorted(times, t_s, side="right"))  # times[i-1] <= t < times[i]
+        span = times[i] - times[i - 1]
+        s = (t_s - times[i - 1]) / span
+        rate = (w[i] - w[i - 1]) / span
+        return w[i - 1] + s * (w[i] - w[i - 1]), rate

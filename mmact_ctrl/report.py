@@ -1,0 +1,71 @@
+"""Terminal table and JSON output of runs (one run = one configuration, several episodes)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
+    # (label, summary key, format)
+    ("success rate", "success_rate", "{:.0%}"),
+    ("final error [mm]", "final_error_m", "mm"),
+    ("mean error [mm]", "mean_error_m", "mm"),
+    ("time to reach [s]", "time_to_reach_s", "{:.2f}"),
+    ("tracking ratio", "tracking_ratio", "{:.2f}"),
+    ("jerk RMS [m/s^3]", "jerk_rms", "{:.1f}"),
+    ("chunk-switch acc [m/s^2]", "chunk_jump_acc_m_s2", "{:.2f}"),
+    ("limit violations", "limit_violations", "{:d}"),
+    ("QP failures", "qp_failures", "{:d}"),
+    ("tick median [us]", "tick_us.median", "{:.0f}"),
+    ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
+    ("real-time factor", "realtime_factor", "{:.1f}x"),
+    ("jumps recovered <1 s", "jump_recovered_rate", "{:.0%}"),
+)
+
+
+def _get(summary: dict, key: str):
+    value = summary
+    for part in key.split("."):
+        value = value.get(part) if isinstance(value, dict) else None
+    return value
+
+
+def _fmt(value, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if fmt == "mm":
+        return f"{1000.0 * value:.1f}"
+    return fmt.format(value)
+
+
+def format_table(summaries: dict[str, dict]) -> str:
+    """Side-by-side table: one column per run name."""
+    names = list(summaries)
+    width0 = max(len(r[0]) for r in TABLE_ROWS)
+    widths = [max(10, len(n)) for n in names]
+    lines = [" " * width0 + "  " + "  ".join(n.rjust(w) for n, w in zip(names, widths))]
+    lines.append("-" * len(lines[0]))
+    for label, key, fmt in TABLE_ROWS:
+        cells = [_fmt(_get(summaries[n], key), fmt).rjust(w) for n, w in zip(names, widths)]
+        lines.append(label.ljust(width0) + "  " + "  ".join(cells))
+    return "\n".join(lines)
+
+
+def _clean(obj):
+    """JSON-safe copy: NaN/inf -> None, numpy scalars -> Python."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path: str | Path, payload: dict) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_clean(payload), indent=2))

@@ -1,0 +1,140 @@
+"""Control layers without the simulator: QP vs independent solvers, Ruckig limits, Kalman filter, retargeting."""
+
+import numpy as np
+import pytest
+import qpsolvers
+
+from controllers.qp_id import TaskReference, TaskSpaceQP
+from controllers.retarget import RetargetConfig, retarget_offset, trusted
+from controllers.robot_description import JointLimits
+from controllers.robot_model import PandaModel
+from controllers.smoother import SmootherConfig, TaskSpaceSmoother
+from controllers.target_filter import FilterConfig, TargetFilter
+
+
+@pytest.fixture(scope="module")
+def model():
+    return PandaModel()
+
+
+def _random_reference(rng, model, q):
+    pos, rot = model.fk(q)
+    return TaskReference(
+        pos_m=pos + rng.normal(0, 0.05, 3),
+        vel_m_s=rng.normal(0, 0.2, 3),
+        acc_m_s2=rng.normal(0, 1.0, 3),
+        rot=rot,
+        ang_vel_rad_s=rng.normal(0, 0.2, 3),
+        ang_acc_rad_s2=np.zeros(3),
+        q_post_rad=model.home_q_rad,
+    )
+
+
+@pytest.mark.parametrize("other", ["clarabel", "daqp"])
+def test_qp_matches_independent_solver_on_random_instances(model, other):
+    if other not in qpsolvers.available_solvers:
+        pytest.skip(f"{other} not installed")
+    rng = np.random.default_rng(1)
+    lim = JointLimits().arrays()
+    qp = TaskSpaceQP()
+    worst = 0.0
+    for _ in range(25):
+        q = rng.uniform(lim["q_min_rad"] + 0.2, lim["q_max_rad"] - 0.2)
+        dq = rng.uniform(-0.5, 0.5, 7) * lim["v_max_rad_s"]
+        terms = model.terms(q, dq)
+        ref = _random_reference(rng, model, q)
+        qp.solve(terms, q, dq, ref)
+        assert qp.last_ok
+        P, g, A, lo, up = qp.problem(terms, q, dq, ref)
+        x = qpsolvers.solve_qp(P, g, G=np.vstack([A, -A]), h=np.concatenate([up, -lo]), solver=other)
+        assert x is not None
+        cost = lambda v: 0.5 * v @ P @ v + g @ v  # noqa: E731
+        # same optimum: equal cost, nearly equal torques
+        assert cost(qp.last_ddq) == pytest.approx(cost(x), rel=1e-3, abs=1e-6)
+        worst = max(worst, np.abs(terms.M @ (qp.last_ddq - x)).max())
+    assert worst < 0.05  # N*m
+
+
+def test_qp_failure_falls_back_and_counts(model):
+    qp = TaskSpaceQP()
+    q = model.home_q_rad
+    dq = np.zeros(7)
+    terms = model.terms(q, dq)
+    ref = _random_reference(np.random.default_rng(0), model, q)
+    ref = TaskReference(**{**ref.__dict__, "pos_m": np.full(3, np.nan)})
+    tau = qp.solve(terms, q, dq, ref)
+    assert qp.failures == 1 and not qp.last_ok
+    assert np.allclose(tau, np.clip(terms.h, -JointLimits().arrays()["tau_max_nm"], JointLimits().arrays()["tau_max_nm"]))
+
+
+def test_ruckig_output_respects_its_limits():
+    cfg = SmootherConfig(v_max_m_s=0.8, a_max_m_s2=4.0, j_max_m_s3=50.0)
+    sm = TaskSpaceSmoother(cfg)
+    sm.reset(np.zeros(3), np.zeros(3))
+    rng = np.random.default_rng(0)
+    target = np.zeros(3)
+    pos, vel, acc = [], [], []
+    for k in range(5000):
+        if k % 400 == 0 and k < 3000:  # step changes of the reference, then 2 s to arrive
+            target = rng.uniform(-0.4, 0.4, 3)
+        p, v, a, *_ = sm.step(target, np.zeros(3), np.zeros(3))
+        pos.append(p), vel.append(v), acc.append(a)
+    vel, acc = np.array(vel), np.array(acc)
+    jerk = np.diff(acc, axis=0) / cfg.dt_s
+    assert np.abs(vel).max() <= cfg.v_max_m_s * (1 + 1e-6)
+    assert np.abs(acc).max() <= cfg.a_max_m_s2 * (1 + 1e-6)
+    assert np.abs(jerk).max() <= cfg.j_max_m_s3 * (1 + 1e-3)
+    assert np.linalg.norm(pos[-1] - target) < 1e-4  # it arrives
+    assert sm.failures == 0
+
+
+def test_filter_converges_on_linear_target_and_survives_dropout():
+    cfg = FilterConfig(meas_noise_m=0.003)
+    kf = TargetFilter(cfg)
+    rng = np.random.default_rng(0)
+    v_true = np.array([0.2, -0.1, 0.05])
+    p0 = np.array([0.5, 0.0, 0.3])
+    errs = []
+    for k in range(300):  # 3 s at 100 Hz, 30 % dropout and a 0.5 s blackout
+        t = k * cfg.dt_s
+        truth = p0 + v_true * t
+        blackout = 1.5 <= t < 2.0
+        z = None if (blackout or rng.random() < 0.3) else truth + rng.normal(0, cfg.meas_noise_m, 3)
+        kf.step(t, z)
+        if kf.initialized:
+            errs.append(np.linalg.norm(kf.pos_m - truth))
+    assert kf.missed > 50
+    assert np.linalg.norm(kf.vel_m_s - v_true) < 0.03
+    assert errs[-1] < 0.004
+    assert np.linalg.norm(kf.predict_pos(3.5) - (p0 + v_true * 3.5)) < 0.02
+
+
+def test_filter_reinitialises_on_a_jump():
+    kf = TargetFilter(FilterConfig())
+    for k in range(100):
+        kf.step(k * 0.01, np.array([0.5, 0.0, 0.3]))
+    for k in range(100, 105):
+        kf.step(k * 0.01, np.array([0.5, 0.15, 0.3]))
+    assert kf.resets == 1
+    assert np.linalg.norm(kf.pos_m - [0.5, 0.15, 0.3]) < 0.005
+    with pytest.raises(ValueError, match="3 finite"):
+        kf.step(1.1, np.array([np.nan, 0, 0]))
+
+
+def test_retarget_rules_and_trust_radius():
+    aim = np.array([0.5, 0.0, 0.3])
+    at_obs = aim + 0.01
+    now = aim + np.array([0.1, 0.0, 0.0])
+    vel = np.array([0.2, 0.0, 0.0])
+    disp = RetargetConfig("displacement", 0.1)
+    off, dv = retarget_offset(disp, 1.0, aim, at_obs, now, vel, 0.5, 2.0)
+    assert np.allclose(off, now - at_obs) and np.allclose(dv, vel)
+    snap = RetargetConfig("snap", 0.1)
+    off0, _ = retarget_offset(snap, 0.5, aim, at_obs, now, vel, 0.5, 2.0)
+    off1, _ = retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)
+    assert np.allclose(off0, 0) and np.allclose(aim + off1, now)
+    assert trusted(disp, aim, at_obs)
+    assert not trusted(disp, aim, aim + 0.2)  # not the chunk's target
+    assert not trusted(RetargetConfig("none"), aim, at_obs)
+    with pytest.raises(ValueError, match="rule"):
+        RetargetConfig("teleport")
