@@ -60,6 +60,7 @@ class ActionChunk:
         if not (self.dt_s > 0):
             raise ValueError(f"ActionChunk.dt_s must be > 0, got {self.dt_s}")
         object.__setattr__(self, "waypoints", w)
+        object.__setattr__(self, "_times_s", self.t0_s + self.dt_s * np.arange(1, w.shape[0] + 1))
 
     @property
     def horizon(self) -> int:
@@ -67,8 +68,8 @@ class ActionChunk:
 
     @property
     def times_s(self) -> np.ndarray:
-        """Absolute time of each waypoint, s."""
-        return self.t0_s + self.dt_s * np.arange(1, self.horizon + 1)
+        """Absolute time of each waypoint, s (computed once)."""
+        return self._times_s  # type: ignore[attr-defined]
 
     @property
     def end_s(self) -> float:

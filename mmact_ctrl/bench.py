@@ -1,0 +1,157 @@
+"""Benchmark of the control layer: median and p99 per component, and the real-time factor of an episode.
+
+    python -m mmact_ctrl.bench [--json PATH] [--calls N]
+
+Components: ``pinocchio`` (all robot terms for one state), ``qp`` (build + OSQP solve),
+``ruckig`` (one smoother step, position and orientation), ``kf`` (one filter step),
+``mpc`` (one MPC solve, when ``controllers.mpc`` is available), ``tick`` (the whole controller
+tick in a real episode: everything but the physics), ``mj_step`` (one world step: ``mj_step``
+plus writing the controls and moving the target) and ``realtime_factor`` of a hybrid episode
+with the scripted source. The world and source are loaded by name (``--world``, ``--source``)
+so that this module never imports the simulator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from controllers.qp_id import TaskReference
+from controllers.target_filter import FilterConfig, TargetFilter
+from mmact_ctrl.config import StackConfig
+from mmact_ctrl.controller import HybridController
+from mmact_ctrl.loop import run_episode
+
+
+def _load(name: str):
+    module, _, attr = name.partition(":")
+    if not attr:
+        raise ValueError(f"expected 'module:function', got {name!r}")
+    return getattr(importlib.import_module(module), attr)
+
+
+def _stats(samples_s: list[float] | np.ndarray) -> dict:
+    us = np.asarray(samples_s, dtype=float) * 1e6
+    return {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)), "n": int(us.size)}
+
+
+def _time(fn, n: int) -> dict:
+    fn()  # warm
+    samples = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        fn()
+        samples[i] = time.perf_counter() - t0
+    return _stats(samples)
+
+
+def bench_components(calls: int = 2000, seed: int = 0) -> dict:
+    """Per-component timings on states drawn around the home pose."""
+    rng = np.random.default_rng(seed)
+    controller = HybridController(StackConfig())
+    model = controller.model
+    q0 = model.home_q_rad
+    states = [(q0 + rng.normal(0, 0.2, 7), rng.normal(0, 0.3, 7)) for _ in range(64)]
+    i = [0]
+
+    def next_state():
+        i[0] = (i[0] + 1) % len(states)
+        return states[i[0]]
+
+    out = {"pinocchio": _time(lambda: model.terms(*next_state()), calls)}
+    pos0, rot0 = model.fk(q0)
+
+    def qp_call():
+        q, dq = next_state()
+        terms = model.terms(q, dq)
+        ref = TaskReference(pos0 + 0.02, np.zeros(3), np.zeros(3), rot0, np.zeros(3), np.zeros(3), q0)
+        t0 = time.perf_counter()
+        controller.qp.solve(terms, q, dq, ref)
+        return time.perf_counter() - t0
+
+    qp_call()
+    out["qp"] = _stats([qp_call() for _ in range(calls)])
+    controller.smoother.reset(pos0, np.zeros(3))
+    k = [0]
+
+    def ruckig_call():
+        k[0] += 1
+        jump = 0.05 if k[0] % 200 == 0 else 0.0  # a chunk switch now and then
+        ref = pos0 + np.array([0.2 * k[0] * 1e-3 % 0.3 + jump, 0.0, 0.0])
+        controller.smoother.step(ref, np.array([0.2, 0.0, 0.0]), np.zeros(3), np.zeros(3))
+
+    out["ruckig"] = _time(ruckig_call, calls)
+    kf = TargetFilter(FilterConfig())
+    kt = [0]
+
+    def kf_call():
+        kt[0] += 1
+        z = None if kt[0] % 10 == 0 else np.array([0.5, 0.2 * kt[0] * 0.01, 0.3]) + rng.normal(0, 0.002, 3)
+        kf.step(kt[0] * 0.01, z)
+
+    out["kf"] = _time(kf_call, calls)
+    try:
+        from controllers.mpc_bench import bench_mpc
+    except ImportError:
+        pass
+    else:
+        out["mpc"] = {k: v for k, v in bench_mpc().items() if k in ("median_us", "p99_us", "n")}
+    return out
+
+
+def bench_episode(world_factory: str, source_factory: str, duration_s: float = 6.0, seed: int = 0) -> dict:
+    """Whole-tick and world-step timings, and the real-time factor, of one hybrid episode."""
+    world = _load(world_factory)()
+    source = _load(source_factory)()
+    controller = HybridController(StackConfig(duration_s=duration_s))
+    step_times: list[float] = []
+    inner = world.step
+
+    def timed_step(tau, gripper):
+        t0 = time.perf_counter()
+        inner(tau, gripper)
+        step_times.append(time.perf_counter() - t0)
+
+    world.step = timed_step  # instrument the world step only
+    log = run_episode(world, source, controller, seed=seed)
+    world.close()
+    return {
+        "tick": _stats(log.tick_us * 1e-6),
+        "mj_step": _stats(step_times),
+        "realtime_factor": float(duration_s / log.wall_s),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m mmact_ctrl.bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--calls", type=int, default=2000, help="calls per component")
+    p.add_argument("--duration-s", type=float, default=6.0, help="length of the timed hybrid episode, s")
+    p.add_argument("--world", default="scenarios.factory:make_world", help="module:function that builds the world")
+    p.add_argument("--source", default="scenarios.factory:make_expert", help="module:function that builds the chunk source")
+    p.add_argument("--json", metavar="PATH", help="write {component: {median_us, p99_us}, realtime_factor: x}")
+    args = p.parse_args(argv)
+    if args.calls < 10 or args.duration_s <= 0:
+        p.error(f"--calls must be >= 10 and --duration-s > 0, got {args.calls} and {args.duration_s}")
+    results = bench_components(args.calls)
+    results.update(bench_episode(args.world, args.source, args.duration_s))
+    print(f"{'component':<12}{'median [us]':>14}{'p99 [us]':>12}")
+    for name, r in results.items():
+        if isinstance(r, dict):
+            print(f"{name:<12}{r['median_us']:>14.1f}{r['p99_us']:>12.1f}")
+    print(f"{'real-time factor (hybrid episode, scripted source)':<12}: {results['realtime_factor']:.1f}x")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(results, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

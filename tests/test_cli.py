@@ -1,0 +1,54 @@
+"""The main job's command line: clear one-line errors for bad values, and the JSON/plot contract."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from scenarios.moving_target import main
+
+BAD = [
+    (["--replan-hz", "-1"], "--replan-hz"),
+    (["--replan-hz", "0"], "--replan-hz"),
+    (["--bins", "-4"], "--bins"),
+    (["--bins", "1"], "bins"),
+    (["--latency-ms", "-5"], "--latency-ms"),
+    (["--target", "zigzag"], "--target"),
+    (["--speed", "-0.1"], "--speed"),
+    (["--episodes", "0"], "--episodes"),
+    (["--dropout", "1.5"], "--dropout"),
+    (["--latency-ms", "7000", "--duration-s", "6"], "latency_ms"),
+    (["--replan-hz", "nan"], "--replan-hz"),
+]
+
+
+@pytest.mark.parametrize("argv,name", BAD)
+def test_bad_values_give_one_clear_line(argv, name):
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios.moving_target", *argv, "--quiet"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 2
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "error" in lines[0] and name in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_json_and_plot_outputs(tmp_path, capsys):
+    out_json, out_png = tmp_path / "run.json", tmp_path / "run.png"
+    rc = main(["--episodes", "1", "--duration-s", "2", "--quiet", "--json", str(out_json), "--plot", str(out_png)])
+    assert rc == 0
+    payload = json.loads(out_json.read_text())
+    assert set(payload) >= {"config", "summary", "episodes"}
+    s = payload["summary"]
+    for key in ("success_rate", "final_error_m", "time_to_reach_s", "tracking_ratio", "jerk_rms", "limit_violations",
+                "qp_failures", "tick_us", "realtime_factor", "jump_recovered_rate", "jump_recovery_s"):
+        assert key in s
+    assert set(s["tick_us"]) == {"median", "p99"}
+    assert set(payload["runs"]) == {"open_loop", "hybrid"}
+    assert len(payload["episodes"]) == 1 and payload["episodes"][0]["mode"] == "hybrid"
+    assert out_png.stat().st_size > 10_000
+    table = capsys.readouterr().out
+    assert "open_loop" in table and "hybrid" in table and "success rate" in table
