@@ -128,6 +128,19 @@ class SimWorld:
         self._kinematics_stale = False
         return self.state()
 
+    def set_arm_state(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None) -> RobotState:
+        """Put the arm at ``q_rad`` (7,) with velocity ``dq_rad_s`` (default rest), e.g. for a random start."""
+        self._require_reset()
+        q = np.asarray(q_rad, dtype=np.float64)
+        dq = np.zeros(7) if dq_rad_s is None else np.asarray(dq_rad_s, dtype=np.float64)
+        if q.shape != (7,) or dq.shape != (7,) or not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            raise ValueError(f"set_arm_state needs 7 finite joint positions and velocities, got {q!r}, {dq!r}")
+        self.data.qpos[self._arm_qpos] = q
+        self.data.qvel[self._arm_dof] = dq
+        mujoco.mj_forward(self.model, self.data)
+        self._kinematics_stale = False
+        return self.state()
+
     def _require_reset(self) -> None:
         if not self._motions:
             raise RuntimeError("SimWorld: call reset(seed) before using the world")

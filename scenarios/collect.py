@@ -1,0 +1,251 @@
+"""Record demonstrations of the scripted expert in the MuJoCo scene, for training the token policy.
+
+    python -m scenarios.collect --episodes 1000 --out data/demos
+
+Each episode: one or two coloured balls (static or moving), an instruction naming one of them,
+the arm driven toward it by the hybrid stack from a randomly perturbed start. Every
+``--sample-every-s`` a sample is recorded: the camera frame(s), the joint state, the expert's
+action chunk for that frame (float, not quantized), the frame ``--future-dt-s`` later (for
+``<|t2i|>``), and a question/answer pair about the scene (for ``<|mmu|>``).
+
+Output: a directory with ``meta.json`` and shards ``shard_XXXX.npz`` (arrays ``images (N,V,H,W,3)
+uint8``, ``future_images``, ``q_rad (N,7)``, ``actions (N,16,7)``, ``instructions``, ``questions``,
+``answers`` (unicode strings), ``target_index (N,)``, ``target_pos_m (N,3)``), which numpy or any
+npz reader opens.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from controllers.robot_description import HOME_Q_RAD, JointLimits
+from controllers.robot_model import PandaModel
+from mmact_ctrl.config import StackConfig
+from mmact_ctrl.controller import HybridController
+from mmact_ctrl.loop import observe
+from policy.action_tokenizer import ActionBounds
+from scenarios.expert import ExpertConfig, ScriptedExpert, expert_actions
+from scenarios.panda_scene import TARGET_COLORS, SceneConfig
+from scenarios.targets import TargetSpec
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """Attributes:
+    episodes: number of episodes.
+    objects: 1, 2, or 0 for a random mix (one third single-object).
+    motion: target motion: "static", "linear" or "mixed" (two thirds static, one third linear).
+    speed_m_s: speed of moving targets.
+    duration_s: episode length.
+    sample_every_s: spacing of recorded samples.
+    future_dt_s: how far ahead the t2i target frame is.
+    start_noise_rad: std of the perturbation of the home pose at the start.
+    image_size_px: camera resolution.
+    cameras: camera names.
+    seed: seed of episode 0 (episode i uses seed + i).
+    """
+
+    episodes: int = 1000
+    objects: int = 2
+    motion: str = "mixed"
+    speed_m_s: float = 0.2
+    duration_s: float = 2.5
+    sample_every_s: float = 0.5
+    future_dt_s: float = 0.5
+    start_noise_rad: float = 0.25
+    image_size_px: int = 96
+    cameras: tuple[str, ...] = ("front",)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if self.objects not in (0, 1, 2):
+            raise ValueError(f"objects must be 1, 2 or 0 (mix), got {self.objects}")
+        if self.motion not in ("static", "linear", "mixed"):
+            raise ValueError(f"motion must be static, linear or mixed, got {self.motion!r}")
+        if not (0 < self.sample_every_s < self.duration_s):
+            raise ValueError(f"sample_every_s must be in (0, duration_s), got {self.sample_every_s}")
+        if not self.future_dt_s > 0:
+            raise ValueError(f"future_dt_s must be > 0, got {self.future_dt_s}")
+
+
+def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_index: int) -> tuple[str, str]:
+    """A question about the scene whose answer a single frame shows."""
+    colors = TARGET_COLORS[: len(objects_pos_m)]
+    i = int(rng.integers(len(colors)))
+    p = objects_pos_m[i]
+    kind = int(rng.integers(3 if len(colors) == 2 else 2))
+    if kind == 0:  # +y is the robot's left
+        side = "left" if p[1] > 0.07 else "right" if p[1] < -0.07 else "center"
+        return f"where is the {colors[i]} ball?", side
+    if kind == 1:
+        return f"is the {colors[i]} ball high or low?", "high" if p[2] > 0.3 else "low"
+    closer = int(np.argmin(np.linalg.norm(objects_pos_m[:, :2], axis=1)))
+    return "which ball is closer to the robot?", colors[closer]
+
+
+def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[str, list]:
+    """Run one episode and return its samples as lists."""
+    from scenarios.sim_world import SimWorld
+
+    seed = cfg.seed + index
+    rng = np.random.default_rng([seed, 7])
+    n_objects = cfg.objects or (1 if rng.random() < 1 / 3 else 2)
+    kind = cfg.motion if cfg.motion != "mixed" else ("linear" if rng.random() < 1 / 3 else "static")
+    key = (n_objects, kind)
+    if key not in world_cache:
+        scene = SceneConfig(n_objects=n_objects, image_size_px=cfg.image_size_px, camera_names=cfg.cameras)
+        world_cache[key] = SimWorld(scene, TargetSpec(kind=kind, speed_m_s=cfg.speed_m_s), noise_m=0.002, dropout=0.1)
+    world = world_cache[key]
+    world.reset(seed)
+    # random start: perturb the home pose (the world's own reset puts the arm at home)
+    lim = JointLimits().arrays()
+    q0 = np.clip(np.asarray(HOME_Q_RAD) + rng.normal(0.0, cfg.start_noise_rad, 7), lim["q_min_rad"] + 0.1, lim["q_max_rad"] - 0.1)
+    world.set_arm_state(q0)
+    stack = StackConfig(mode="hybrid", duration_s=cfg.duration_s + cfg.future_dt_s, latency_ms=0.0)
+    if "model" not in world_cache:
+        world_cache["model"] = PandaModel()
+    controller = HybridController(stack, model=world_cache["model"])
+    controller.reset(world.state().q_rad)
+    expert_cfg = ExpertConfig()
+    source = ScriptedExpert(expert_cfg)
+    dt = world.dt_s
+    n = int(round((cfg.duration_s + cfg.future_dt_s) / dt))
+    every = int(round(cfg.sample_every_s / dt))
+    future = int(round(cfg.future_dt_s / dt))
+    frames: dict[int, np.ndarray] = {}
+    samples: dict[str, list] = {k: [] for k in ("images", "future_images", "q_rad", "actions", "instructions",
+                                                "questions", "answers", "target_index", "target_pos_m")}
+    pending = []
+    for k in range(n + 1):
+        t = k * dt
+        if k % every == 0 and k * dt < cfg.duration_s - 1e-9:
+            obs = observe(world, controller, t, with_image=True)
+            frames[k] = obs.image
+            q, a = question_answer(rng, world.objects_pos_m(), world.target_index)
+            pending.append((k, obs, q, a))
+            controller.activate(source.plan(obs), t, controller.target_estimate())
+        if any(kk + future == k for kk, *_ in pending) and k not in frames:
+            frames[k] = world.render()
+        if k == n:
+            break
+        if k % 10 == 0:
+            controller.perceive(t, world.measure_target())
+        state = world.state()
+        out = controller.tick(t, state.q_rad, state.dq_rad_s)
+        world.step(out.tau_nm, out.gripper_m)
+    for k, obs, q, a in pending:
+        samples["images"].append(frames[k])
+        samples["future_images"].append(frames[k + future])
+        samples["q_rad"].append(obs.q_rad.astype(np.float32))
+        samples["actions"].append(expert_actions(expert_cfg, obs.ee_pos_m, obs.target_pos_m).astype(np.float32))
+        samples["instructions"].append(obs.instruction)
+        samples["questions"].append(q)
+        samples["answers"].append(a)
+        samples["target_index"].append(world.target_index)
+        samples["target_pos_m"].append(obs.target_pos_m.astype(np.float32))
+    return samples
+
+
+def _worker(args: tuple[CollectConfig, list[int]]) -> dict[str, list]:
+    cfg, indices = args
+    cache: dict = {}
+    merged: dict[str, list] = {}
+    for i in indices:
+        for key, values in collect_episode(cfg, i, cache).items():
+            merged.setdefault(key, []).extend(values)
+    for w in cache.values():
+        if hasattr(w, "close"):
+            w.close()
+    return merged
+
+
+def write_shard(out: Path, index: int, samples: dict[str, list]) -> int:
+    arrays = {}
+    for key, values in samples.items():
+        if key in ("instructions", "questions", "answers"):
+            arrays[key] = np.array(values, dtype=str)
+        else:
+            arrays[key] = np.stack([np.asarray(v) for v in values])
+    np.savez_compressed(out / f"shard_{index:04d}.npz", **arrays)
+    return len(samples["images"])
+
+
+def collect(cfg: CollectConfig, out: Path, workers: int = 1, episodes_per_shard: int = 100, progress: bool = True) -> int:
+    """Collect ``cfg.episodes`` episodes into ``out``; returns the number of samples."""
+    from tqdm import tqdm
+
+    out.mkdir(parents=True, exist_ok=True)
+    chunks = [list(range(s, min(s + 10, cfg.episodes))) for s in range(0, cfg.episodes, 10)]
+    total = 0
+    shard, buffer, buffered_eps = 0, {}, 0
+    bar = tqdm(total=cfg.episodes, desc="episodes", unit="ep", disable=not progress, file=sys.stderr)
+    ctx = mp.get_context("spawn")
+    pool = ctx.Pool(workers) if workers > 1 else None
+    try:
+        results = pool.imap(_worker, [(cfg, c) for c in chunks]) if pool else map(_worker, [(cfg, c) for c in chunks])
+        for c, res in zip(chunks, results):
+            for key, values in res.items():
+                buffer.setdefault(key, []).extend(values)
+            buffered_eps += len(c)
+            bar.update(len(c))
+            if buffered_eps >= episodes_per_shard:
+                total += write_shard(out, shard, buffer)
+                shard, buffer, buffered_eps = shard + 1, {}, 0
+        if buffer:
+            total += write_shard(out, shard, buffer)
+    finally:
+        bar.close()
+        if pool:
+            pool.close()
+            pool.join()
+    bounds = ActionBounds()
+    meta = {
+        "image_size_px": cfg.image_size_px,
+        "camera_names": list(cfg.cameras),
+        "chunk_horizon": ExpertConfig().horizon,
+        "chunk_dt_s": ExpertConfig().dt_s,
+        "action_bounds": {"low": list(bounds.low), "high": list(bounds.high)},
+        "action_bins": 2048,
+        "future_dt_s": cfg.future_dt_s,
+        "n_samples": total,
+        "collect_config": asdict(cfg),
+        "command": " ".join(["python -m scenarios.collect", *sys.argv[1:]]),
+    }
+    (out / "meta.json").write_text(json.dumps(meta, indent=2))
+    return total
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m scenarios.collect", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--episodes", type=int, default=1000, help="number of episodes")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--objects", type=int, default=0, choices=(0, 1, 2), help="objects per scene (0: random mix of 1 and 2)")
+    p.add_argument("--motion", default="mixed", choices=("static", "linear", "mixed"), help="target motion")
+    p.add_argument("--speed", type=float, default=0.2, help="speed of moving targets (m/s)")
+    p.add_argument("--image-size-px", type=int, default=96, help="camera resolution")
+    p.add_argument("--cameras", nargs="+", default=["front"], help="camera names")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    p.add_argument("--workers", type=int, default=1, help="parallel processes")
+    args = p.parse_args(argv)
+    try:
+        cfg = CollectConfig(episodes=args.episodes, objects=args.objects, motion=args.motion, speed_m_s=args.speed,
+                            image_size_px=args.image_size_px, cameras=tuple(args.cameras), seed=args.seed)
+    except ValueError as exc:
+        p.error(str(exc))
+    n = collect(cfg, Path(args.out), workers=args.workers)
+    print(f"wrote {n} samples to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
