@@ -9,7 +9,9 @@ from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
 from controllers.target_filter import FilterConfig
 
-MODES: tuple[str, ...] = ("open_loop", "hybrid")
+MODES: tuple[str, ...] = ("open_loop", "receding", "temporal_ensemble", "inpaint", "hybrid")
+#: modes that execute chunks without the control layer's corrections (the baselines from the field).
+BASELINE_MODES: tuple[str, ...] = ("open_loop", "receding", "temporal_ensemble", "inpaint")
 
 
 @dataclass(frozen=True)
@@ -17,8 +19,14 @@ class StackConfig:
     """How chunks are executed.
 
     Attributes:
-        mode: ``open_loop`` (dequantized waypoints interpolated and tracked by the QP, nothing else)
-            or ``hybrid`` (retargeting + Ruckig + QP).
+        mode: how chunks are executed. ``open_loop``: each chunk's dequantized waypoints are
+            interpolated and tracked by the QP, nothing else, replanning on the clock at ``replan_hz``;
+            ``receding``: the first ``receding_k`` waypoints of each chunk run, then the source is
+            queried again (Diffusion Policy style: replanning is paced by execution, not the clock);
+            ``temporal_ensemble``: overlapping chunks are averaged with exponential weights, the oldest
+            weighing most (ACT); ``inpaint``: real-time chunking: the waypoints that will run while the
+            next chunk is computed are given to the source as known and the rest is filled in, so chunks
+            join without a jump; ``hybrid``: ours, Kalman-filtered retargeting + Ruckig + QP.
         use_ruckig: hybrid only: smooth the reference with Ruckig.
         retarget: hybrid only: the retargeting rule and trust radius.
         replan_hz: how often the chunk source is queried, Hz.
@@ -27,6 +35,8 @@ class StackConfig:
         dt_s: physics and control period, s.
         perception_hz: target measurement rate, Hz.
         duration_s: episode length, s.
+        receding_k: receding: waypoints executed per chunk before replanning (0: ``1 / (replan_hz * chunk dt)``).
+        ensemble_decay_per_s: temporal_ensemble: weight ``exp(-decay * (t0_chunk - t0_oldest))``.
     """
 
     mode: str = "hybrid"
@@ -38,6 +48,8 @@ class StackConfig:
     dt_s: float = 0.001
     perception_hz: float = 100.0
     duration_s: float = 6.0
+    receding_k: int = 0
+    ensemble_decay_per_s: float = 1.0
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -57,6 +69,10 @@ class StackConfig:
             raise ValueError(f"perception_hz must be in (0, {1.0 / self.dt_s:g}], got {self.perception_hz}")
         if not self.duration_s > 0:
             raise ValueError(f"duration_s must be > 0, got {self.duration_s}")
+        if self.receding_k < 0:
+            raise ValueError(f"receding_k must be >= 0, got {self.receding_k}")
+        if not self.ensemble_decay_per_s >= 0:
+            raise ValueError(f"ensemble_decay_per_s must be >= 0, got {self.ensemble_decay_per_s}")
         if self.latency_ms / 1000.0 >= self.duration_s:
             raise ValueError(
                 f"latency_ms={self.latency_ms:g} is not shorter than the episode ({self.duration_s:g} s): no chunk would ever run"

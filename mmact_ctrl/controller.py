@@ -42,6 +42,8 @@ class HybridController:
         self.q_post = self.model.home_q_rad
         _, self.rot_nominal = self.model.fk(self.q_post)
         self.active: ChunkReference | None = None
+        self.ensemble: list[ChunkReference] = []  # temporal_ensemble: every chunk still covering the future
+        self._ensemble_mode = config.mode == "temporal_ensemble"
         self._trusted = False
         self._hold_pos = np.zeros(3)
         self._hold_rotvec = np.zeros(3)
@@ -58,6 +60,7 @@ class HybridController:
         self.qp.failures = 0
         self.qp.solves = 0
         self.active = None
+        self.ensemble = []
         self._trusted = False
 
     def ee_pose(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -79,13 +82,28 @@ class HybridController:
         """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency)."""
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
+        if self._ensemble_mode:
+            self.ensemble = [c for c in self.ensemble if c.t_last_s > t_s] + [self.active]
+
+    def _ensemble_sample(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """ACT temporal ensembling: weighted mean of every chunk covering ``t_s``, oldest weighing most."""
+        live = [c for c in self.ensemble if c.t_last_s >= t_s] or [self.ensemble[-1]]
+        oldest = live[0].chunk.t0_s
+        action, rate, total = np.zeros(7), np.zeros(7), 0.0
+        for c in live:
+            w = float(np.exp(-self.config.ensemble_decay_per_s * (c.chunk.t0_s - oldest)))
+            a, r = c.sample(t_s)
+            action += w * a
+            rate += w * r
+            total += w
+        return action / total, rate / total
 
     # ---- the 1 kHz tick ------------------------------------------------------------
     def reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing."""
         if self.active is None:
             return self._hold_pos, np.zeros(3), self._hold_rotvec, np.zeros(3), GRIPPER_OPEN_M
-        action, rate = self.active.sample(t_s)
+        action, rate = self._ensemble_sample(t_s) if self._ensemble_mode else self.active.sample(t_s)
         pos, vel = action[:3], rate[:3]
         if self._trusted and self.filter.initialized:
             offset, offset_vel = retarget_offset(

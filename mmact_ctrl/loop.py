@@ -59,6 +59,27 @@ def observe(world: World, controller: HybridController, t_s: float, with_image: 
     )
 
 
+def receding_k(cfg, chunk: ActionChunk) -> int:
+    """Waypoints a receding-horizon executor runs per chunk."""
+    if cfg.receding_k:
+        return min(cfg.receding_k, chunk.horizon)
+    return int(min(chunk.horizon, max(1, round(1.0 / (cfg.replan_hz * chunk.dt_s)))))
+
+
+def known_prefix(controller: HybridController, pending, t_s: float, latency_s: float, source) -> np.ndarray:
+    """Inpainting: the waypoints (n, 7) that will run while the next chunk is computed, taken from the
+    chunk that will be executing then (the last one scheduled), at the new chunk's waypoint times."""
+    scheduled = pending[-1][1] if pending else (controller.active.chunk if controller.active else None)
+    if scheduled is None:
+        return np.zeros((0, 7))
+    dt = getattr(source, "chunk_dt_s", scheduled.dt_s)
+    n_known = int(np.ceil(latency_s / dt - 1e-9))
+    from mmact_ctrl.reference import ChunkReference
+
+    ref = ChunkReference(chunk=scheduled, t_active_s=t_s, target_at_obs_m=None)
+    return np.array([ref.sample(t_s + (i + 1) * dt)[0] for i in range(n_known)]).reshape(n_known, 7)
+
+
 def run_episode(
     world: World,
     source: ChunkSource,
@@ -96,6 +117,7 @@ def run_episode(
     )
     pending: deque[tuple[float, ActionChunk, np.ndarray | None]] = deque()
     next_plan_s = 0.0
+    mode = cfg.mode
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
     perception_every = cfg.perception_every
     wall0 = time.perf_counter()
@@ -113,16 +135,24 @@ def run_episode(
         if t >= next_plan_s - eps:
             obs = observe(world, controller, t, with_image=source.needs_image)
             p0 = time.perf_counter()
-            chunk = source.plan(obs)
+            if mode == "inpaint":
+                chunk = source.plan_inpaint(obs, known_prefix(controller, pending, t, latency_s, source))
+            else:
+                chunk = source.plan(obs)
             log.plan_ms.append((time.perf_counter() - p0) * 1e3)
             log.clipped_actions += chunk.n_clipped
             pending.append((t + latency_s, chunk, controller.target_estimate()))
-            next_plan_s += replan_period_s
+            if mode == "receding":  # the next query is set when this chunk starts running
+                next_plan_s = float("inf")
+            else:
+                next_plan_s += replan_period_s
         tick0 = time.perf_counter()
         while pending and pending[0][0] <= t + eps:
             t_act, chunk, target_at_obs = pending.popleft()
             controller.activate(chunk, t, target_at_obs)
             log.chunk_active_s.append(t)
+            if mode == "receding":  # query again once k waypoints of this chunk have run
+                next_plan_s = t + receding_k(cfg, chunk) * chunk.dt_s
         out = controller.tick(t, state.q_rad, state.dq_rad_s)
         log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + perception_us
         log.ee_pos_m[k] = state.ee_pos_m

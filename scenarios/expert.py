@@ -68,8 +68,25 @@ class ScriptedExpert:
         self.config = config
         self.tokenizer = tokenizer
 
+    @property
+    def chunk_dt_s(self) -> float:
+        return self.config.dt_s
+
     def plan(self, observation: Observation) -> ActionChunk:
         actions = expert_actions(self.config, observation.ee_pos_m, observation.target_pos_m)
+        return self._finish(actions, observation)
+
+    def plan_inpaint(self, observation: Observation, known: np.ndarray) -> ActionChunk:
+        """Real-time chunking with the expert: the first ``len(known)`` waypoints are frozen (they run
+        while this chunk is computed); the rest is a min-jerk approach from the last frozen waypoint."""
+        known = np.asarray(known, dtype=np.float64).reshape(-1, 7)
+        n = min(len(known), self.config.horizon)
+        if n == 0:
+            return self.plan(observation)
+        rest = expert_actions(self.config, known[n - 1, :3], observation.target_pos_m)[: self.config.horizon - n]
+        return self._finish(np.vstack([known[:n], rest]), observation)
+
+    def _finish(self, actions: np.ndarray, observation: Observation) -> ActionChunk:
         if self.tokenizer is None:
             return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=observation.t0_s)
         waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)

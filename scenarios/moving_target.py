@@ -71,9 +71,17 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     g = p.add_argument_group("execution")
-    g.add_argument("--mode", nargs="+", choices=MODES, default=list(MODES),
+    g.add_argument("--mode", nargs="+", choices=MODES, default=["open_loop", "hybrid"],
                    help="open_loop: dequantized waypoints interpolated and tracked by the QP, nothing else; "
-                        "hybrid: Kalman-filtered retargeting + Ruckig + QP. Several modes run side by side on the same seeds.")
+                        "receding: run the first k waypoints of each chunk, then replan (Diffusion Policy); "
+                        "temporal_ensemble: average overlapping chunks with exponential weights (ACT); "
+                        "inpaint: real-time chunking, the waypoints that run during inference are frozen and the rest "
+                        "filled in; hybrid: ours, Kalman-filtered retargeting + Ruckig + QP. "
+                        "Several modes run side by side on the same seeds.")
+    g.add_argument("--receding-k", type=_number(int, "--receding-k", 0), default=0,
+                   help="receding: waypoints run per chunk before replanning (0: 1 / (replan-hz * chunk-dt-s))")
+    g.add_argument("--ensemble-decay", type=_number(float, "--ensemble-decay", 0), default=1.0,
+                   help="temporal_ensemble: weight exp(-decay * age difference in s), oldest chunk weighs most")
     g.add_argument("--no-ruckig", action="store_true", help="hybrid: track the retargeted reference without Ruckig smoothing")
     g.add_argument("--retarget", choices=RULES, default="displacement",
                    help="hybrid: displacement shifts the chunk by how far the filtered target moved since the observation; "
@@ -115,6 +123,8 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         latency_ms=args.latency_ms,
         bins=args.bins,
         duration_s=args.duration_s,
+        receding_k=args.receding_k,
+        ensemble_decay_per_s=args.ensemble_decay,
     )
 
 

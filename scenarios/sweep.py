@@ -1,0 +1,254 @@
+"""The study: how much of a chunked policy's lost reactivity does the control layer buy back?
+
+    python -m scenarios.sweep --out out/sweep            # default grid, < 10 min on 2 cores
+    python -m scenarios.sweep --quick --out out/quick    # < 1 min
+    python -m scenarios.sweep --backend ray --out ...    # spread the same grid over a Ray cluster
+
+The grid is the union of studies (each a small cartesian product over mode x replan_hz x
+latency_ms x target x speed_m_s x bins x seed):
+
+- ``replan``:  every mode vs replan frequency (linear target, 0.3 m/s, 200 ms latency);
+- ``speed``:   open_loop / hybrid vs target speed (1 Hz);
+- ``latency``: open_loop / hybrid vs latency (1 Hz);
+- ``bins``:    the quantization trap, 64 to 8192 bins and none (static target, open_loop and hybrid);
+- ``jump``:    the change of mind: the target teleports mid-chunk (1 Hz).
+
+One episode per cell; each result is a JSON file under ``OUT/cells/`` so an interrupted sweep
+resumes where it stopped. ``OUT/results.csv`` has one row per episode (every grid axis and every
+episode metric); ``OUT/report.md`` holds the summary tables and links the PNG figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from itertools import product
+from pathlib import Path
+
+import numpy as np
+
+from mmact_ctrl.config import MODES
+
+AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed")
+
+
+@dataclass(frozen=True)
+class Study:
+    """One cartesian product of the grid."""
+
+    name: str
+    modes: tuple[str, ...]
+    replan_hz: tuple[float, ...]
+    latency_ms: tuple[float, ...]
+    target: tuple[str, ...]
+    speed_m_s: tuple[float, ...]
+    bins: tuple[int, ...]
+    seeds: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        bad = [m for m in self.modes if m not in MODES]
+        if bad:
+            raise ValueError(f"study {self.name!r}: unknown mode(s) {bad}; expected some of {MODES}")
+        if any(not (f > 0 and math.isfinite(f)) for f in self.replan_hz):
+            raise ValueError(f"study {self.name!r}: replan_hz must be > 0, got {self.replan_hz}")
+        if any(not (x >= 0) for x in self.latency_ms):
+            raise ValueError(f"study {self.name!r}: latency_ms must be >= 0, got {self.latency_ms}")
+        if any(not (x >= 0) for x in self.speed_m_s):
+            raise ValueError(f"study {self.name!r}: speed_m_s must be >= 0, got {self.speed_m_s}")
+        if any(b < 0 or b == 1 for b in self.bins):
+            raise ValueError(f"study {self.name!r}: bins must be 0 or >= 2, got {self.bins}")
+        if not self.seeds:
+            raise ValueError(f"study {self.name!r}: needs at least one seed")
+
+    def cells(self) -> list[dict]:
+        return [
+            dict(study=self.name, mode=m, replan_hz=f, latency_ms=lat, target=tg, speed_m_s=sp, bins=b, seed=sd)
+            for m, f, lat, tg, sp, b, sd in product(
+                self.modes, self.replan_hz, self.latency_ms, self.target, self.speed_m_s, self.bins, self.seeds
+            )
+        ]
+
+
+def default_grid(quick: bool = False, seeds: int = 3) -> list[Study]:
+    all_modes = MODES
+    if quick:
+        s = (0,)
+        return [
+            Study("replan", all_modes, (1.0, 5.0), (200.0,), ("linear",), (0.3,), (2048,), s),
+            Study("bins", ("open_loop",), (1.0,), (200.0,), ("static",), (0.0,), (64, 2048, 0), s),
+            Study("jump", ("hybrid",), (1.0,), (200.0,), ("jump",), (0.0,), (2048,), s),
+        ]
+    s = tuple(range(seeds))
+    return [
+        Study("replan", all_modes, (0.5, 1.0, 2.0, 5.0, 10.0), (200.0,), ("linear",), (0.3,), (2048,), s),
+        Study("speed", ("open_loop", "hybrid"), (1.0,), (200.0,), ("linear",), (0.1, 0.2, 0.4), (2048,), s),
+        Study("latency", ("open_loop", "hybrid"), (1.0,), (0.0, 100.0, 400.0), ("linear",), (0.3,), (2048,), s),
+        Study("bins", ("open_loop", "hybrid"), (1.0,), (200.0,), ("static",), (0.0,), (64, 256, 1024, 2048, 8192, 0), s),
+        Study("jump", ("open_loop", "hybrid"), (1.0,), (200.0,), ("jump",), (0.0,), (2048,), tuple(range(3 * seeds))),
+    ]
+
+
+def cell_key(cell: dict, duration_s: float) -> str:
+    text = json.dumps({**{k: cell[k] for k in AXES if k != "study"}, "duration_s": duration_s}, sort_keys=True)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+# ---- running one cell (in a worker process) ------------------------------------------------
+
+_CACHE: dict = {}
+
+
+def run_cell(cell: dict, duration_s: float) -> dict:
+    """One episode for one grid cell; returns the row (axes + episode metrics)."""
+    from controllers.retarget import RetargetConfig
+    from mmact_ctrl.config import StackConfig
+    from mmact_ctrl.controller import HybridController
+    from mmact_ctrl.loop import run_episode
+    from mmact_ctrl.metrics import episode_metrics
+    from scenarios.factory import make_expert, make_world
+
+    wkey = ("world", cell["target"], cell["speed_m_s"])
+    if wkey not in _CACHE:
+        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+    if "model" not in _CACHE:
+        from controllers.robot_model import PandaModel
+
+        _CACHE["model"] = PandaModel()
+    cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
+                      duration_s=duration_s, retarget=RetargetConfig("displacement"))
+    controller = HybridController(cfg, model=_CACHE["model"])
+    log = run_episode(_CACHE[wkey], make_expert(bins=cell["bins"]), controller, seed=cell["seed"])
+    m = episode_metrics(log)
+    m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
+    m.pop("instruction", None)
+    return {**cell, "duration_s": duration_s, **{k: v for k, v in m.items() if k != "seed"}}
+
+
+def _run_and_store(args: tuple[dict, float, str]) -> dict:
+    cell, duration_s, path = args
+    row = run_cell(cell, duration_s)
+    Path(path).write_text(json.dumps(row))
+    return row
+
+
+# ---- backends ------------------------------------------------------------------------------
+
+
+def run_local(todo: list[tuple[dict, float, str]], workers: int, progress) -> None:
+    import multiprocessing as mp
+
+    if workers <= 1:
+        for item in todo:
+            _run_and_store(item)
+            progress()
+        return
+    with mp.get_context("spawn").Pool(workers) as pool:
+        for _ in pool.imap_unordered(_run_and_store, todo):
+            progress()
+
+
+def run_ray(todo: list[tuple[dict, float, str]], address: str | None, progress) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise SystemExit("--backend ray needs Ray: pip install -e '.[cluster]'") from None
+    ray.init(address=address or "auto", ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(run_cell)
+    refs = {remote.remote(cell, duration_s): path for cell, duration_s, path in todo}
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        row = ray.get(done[0])
+        Path(refs[done[0]]).write_text(json.dumps(row))  # results are files on the driver: resumable
+        progress()
+
+
+# ---- report --------------------------------------------------------------------------------
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m scenarios.sweep", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="output directory (cells/, results.csv, report.md, *.png)")
+    p.add_argument("--quick", action="store_true", help="a small grid that finishes in under a minute")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per cell of the default grid")
+    p.add_argument("--duration-s", type=float, default=None, help="episode length (default 6 s, 4 s with --quick)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local", help="process pool here, or a Ray cluster")
+    p.add_argument("--workers", type=int, default=2, help="local backend: parallel processes")
+    p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
+    p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
+                                                  "speed_m_s, bins, seeds}) instead of the default grid")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    if args.seeds < 1 or args.workers < 1:
+        p.error(f"--seeds and --workers must be >= 1, got {args.seeds} and {args.workers}")
+    duration_s = args.duration_s if args.duration_s is not None else (4.0 if args.quick else 6.0)
+    if not duration_s > 0:
+        p.error(f"--duration-s must be > 0, got {duration_s}")
+    try:
+        if args.grid:
+            spec = json.loads(Path(args.grid).read_text()) if Path(args.grid).is_file() else json.loads(args.grid)
+            studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
+        else:
+            studies = default_grid(args.quick, args.seeds)
+        from scenarios.targets import KINDS
+
+        for s in studies:
+            bad = [t for t in s.target if t not in KINDS]
+            if bad:
+                raise ValueError(f"study {s.name!r}: unknown target(s) {bad}; expected some of {KINDS}")
+            if any(lat / 1000.0 >= duration_s for lat in s.latency_ms):
+                raise ValueError(f"study {s.name!r}: a latency of {max(s.latency_ms)} ms is not shorter than the episode")
+    except (ValueError, TypeError, json.JSONDecodeError) as exc:
+        p.error(f"bad grid: {exc}")
+
+    out = Path(args.out)
+    (out / "cells").mkdir(parents=True, exist_ok=True)
+    cells = [c for s in studies for c in s.cells()]
+    todo, rows = [], []
+    for c in cells:
+        path = out / "cells" / f"{cell_key(c, duration_s)}.json"
+        if path.is_file():
+            continue
+        todo.append((c, duration_s, str(path)))
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    bar = tqdm(total=len(cells), initial=len(cells) - len(todo), desc="cells", unit="ep", disable=args.quiet,
+               file=sys.stderr)
+    try:
+        if args.backend == "ray":
+            run_ray(todo, args.ray_address, lambda: bar.update(1))
+        else:
+            run_local(todo, args.workers, lambda: bar.update(1))
+    finally:
+        bar.close()
+    for c in cells:  # rows in grid order, each cell's study label from this grid
+        row = json.loads((out / "cells" / f"{cell_key(c, duration_s)}.json").read_text())
+        rows.append({**row, "study": c["study"]})
+    write_csv(rows, out / "results.csv")
+    from scenarios.sweep_report import write_report
+
+    write_report(rows, out, wall_s=time.perf_counter() - t0, resumed=len(cells) - len(todo))
+    print(f"{len(rows)} episodes ({len(cells) - len(todo)} resumed) -> {out / 'results.csv'}, {out / 'report.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
