@@ -169,5 +169,5 @@ def run_episode(
     log.wall_s = time.perf_counter() - wall0
     log.qp_failures = controller.qp.failures
     log.smoother_failures = controller.smoother.failures
-    log.jump_times_s = tuple(world.target_jump_times_s())
+    log.jump_times_s = tuple(t for t in world.target_jump_times_s() if t <= cfg.duration_s)
     return log

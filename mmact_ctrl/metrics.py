@@ -10,8 +10,8 @@
 - limit_violations: control ticks with a measured joint position outside its limits, a measured
   joint velocity above its limit, or a commanded torque above the effort limit (before any clipping).
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
-- jump recovery: for each target teleport, whether the TCP got within the success radius of the
-  new goal within ``jump_window_s`` (1 s), and how long it took.
+- jump recovery: for each target teleport whose 1 s window ends inside the episode, whether the
+  TCP got within the success radius of the new goal within ``jump_window_s`` (1 s), and how long it took.
 """
 
 from __future__ import annotations
@@ -76,8 +76,8 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
     recovered, recovery_s = [], []
     for tj in log.jump_times_s:
         j0 = int(np.ceil(tj / dt)) + 1
-        j1 = min(len(err), j0 + int(round(config.jump_window_s / dt)))
-        if j0 >= len(err):
+        j1 = j0 + int(round(config.jump_window_s / dt))
+        if j1 > len(err):  # the episode ends before the recovery window does: not counted
             continue
         hit = np.flatnonzero(inside[j0:j1])
         recovered.append(bool(hit.size))

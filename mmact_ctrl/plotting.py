@@ -35,7 +35,7 @@ def plot_runs(logs: dict[str, EpisodeLog], path: str | Path, success_radius_m: f
         ax = axes[1, col]
         ax.plot(log.t_s, 1000.0 * err, color="k", lw=1.2)
         ax.axhline(1000.0 * success_radius_m, color="tab:orange", ls="--", lw=1.0, label="success radius")
-        for ts in log.jump_times_s:
+        for ts in (tj for tj in log.jump_times_s if tj <= log.t_s[-1]):
             ax.axvline(ts, color="tab:purple", ls=":", lw=1.0)
         ax.set_yscale("log")
         ax.set_xlabel("time [s]")

@@ -203,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--duration-s must be > 0, got {duration_s}")
     try:
         if args.grid:
-            spec = json.loads(Path(args.grid).read_text()) if Path(args.grid).is_file() else json.loads(args.grid)
+            text = args.grid.strip()
+            spec = json.loads(text if text.startswith("[") or not Path(text).is_file() else Path(text).read_text())
             studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
         else:
             studies = default_grid(args.quick, args.seeds)
@@ -215,7 +216,9 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"study {s.name!r}: unknown target(s) {bad}; expected some of {KINDS}")
             if any(lat / 1000.0 >= duration_s for lat in s.latency_ms):
                 raise ValueError(f"study {s.name!r}: a latency of {max(s.latency_ms)} ms is not shorter than the episode")
-    except (ValueError, TypeError, json.JSONDecodeError) as exc:
+        if not isinstance(spec if args.grid else [], list):
+            raise ValueError("--grid must be a JSON list of studies")
+    except (ValueError, TypeError, OSError) as exc:
         p.error(f"bad grid: {exc}")
 
     out = Path(args.out)
