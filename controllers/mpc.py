@@ -16,43 +16,70 @@ orientation error (a world-frame rotation vector relative to the current orienta
 The linearization is refreshed at every solve (real-time-iteration style); only the first
 interval of each plan is used before the next solve, where the model is accurate.
 
-State ``x = (q, dq, u_prev)`` (21): the previous acceleration is carried in the state so that
-the acceleration-change (jerk) penalty stays stage-wise, which keeps the problem in the
-banded optimal-control form that HPIPM / fatrop exploit.  Cost, per step k = 1..N::
+Decision variables ``z = [u_0, q_1, dq_1, ..., u_{N-1}, q_N, dq_N]`` (420 for N = 20; the
+current state is a parameter), 280 dynamics equality rows, 7 terminal rows, simple bounds on
+every variable.  Cost, per step k = 1..N::
 
     w_pos |p[k] - pos_ref[k-1]|^2 + w_rot |r[k] - rotvec_ref[k-1]|^2 + w_posture |q[k] - q_nom|^2
     + w_vel |dq[k]|^2 + w_acc |u[k-1]|^2 + w_jerk |u[k-1] - u[k-2]|^2,   plus w_terminal_vel |dq[N]|^2
 
+with ``u[-1]`` the acceleration the previous plan commands now (smooth hand-over between
+plans).  References farther than ``max_ref_dist_m`` / ``max_ref_angle_rad`` from the current
+pose are pulled in along their direction (the linear model means nothing farther away, and a
+far goal makes the QP badly scaled).
+
 Constraints at every step: ``q`` inside the limits shrunk by ``q_margin_rad``, ``|dq|`` and
 ``|u|`` inside ``v_limit_scale`` / ``a_limit_scale`` times the limits, and a terminal
-*braking set* ``q_min <= q[N] + dq[N] * v_max / a_max <= q_max`` (per joint). The braking set
-is linear and conservative (stopping distance v^2/(2a) <= v v_max / a): from a terminal
-state inside it the arm can always stop within the position limits after the horizon, so
-the shifted problem stays feasible (recursive feasibility for the nominal model).
+*braking set* ``q_min <= q[N] + dq[N] * v_max / a_max <= q_max`` (per joint).  It is linear and
+conservative (stopping distance v^2/(2a) <= v v_max / a, and one braking step keeps a state
+inside it): from a terminal state inside it the arm can always stop within the limits after
+the horizon, so the shifted problem stays feasible (recursive feasibility, nominal model).
 
 Feasibility guard: if the current state is already outside the margins (model error, a
-bump), the position/velocity bounds of each step are widened per joint just enough to
-contain the maximal-braking trajectory from the current state, so the QP is always feasible
-and the plan brakes back toward the admissible set instead of failing.
+bump, solver tolerance), the position/velocity bounds of each step are widened per joint just
+enough to contain the maximal-braking trajectory from the current state, so the QP stays
+feasible and the plan brakes back toward the admissible set instead of failing.
+
+The returned accelerations are clipped to the acceleration box and re-integrated exactly
+from the measured state, so a plan is always dynamically consistent and never exceeds the
+acceleration limits; positions/velocities can enter the margin band by the solver tolerance
+(measured <= 2.2 mrad of the 50 mrad band), never the true limits.
 
 Implementation and measurements
 -------------------------------
-The QP is built ONCE symbolically with CasADi (SX): a ``casadi.Function`` maps the parameter
-vector (q0, dq0, u_prev, p0, J, references, q_nom) to the nonzeros of (H, g, A, bounds) with
-a fixed sparsity.  Each solve evaluates that function and re-solves a solver instance
-created once, warm-started.  Measured on the 2-core development machine (7 joints, N = 20,
-581 variables, 427 equality rows, a 0.2 m/s moving target, ``python -m controllers.mpc_bench``;
-medians / p99 in microseconds, whole ``solve()`` call including input checks and plan
-post-processing):
+The QP is built ONCE symbolically with CasADi (SX): one ``casadi.Function`` (after ``cse``)
+maps the parameter vector (q0, dq0, u_prev, J, references, q_nom) to the nonzeros of
+(triu(H), g, A, bounds) with a fixed sparsity; it is evaluated through ``Function.buffer()``
+straight into numpy memory (~30 us; going through ``DM`` -> numpy cost ~300-400 us).  ``A``
+is constant, only ``H`` (through J), ``g`` and the bounds change.
 
-    ===============================================  =========  ========
-    backend                                          median us  p99 us
-    ===============================================  =========  ========
-    ``casadi.Opti('conic')`` re-built per call        ~40 000    (FACTS.md)
-    ``casadi.conic('hpipm')`` (OCP structure)           SEE_BENCH
-    ===============================================  =========  ========
+Whole ``solve()`` call (input checks, QP data, solve, rollout), closed loop on the Panda
+(Pinocchio kinematics) tracking a point at 0.2 m/s, 300 calls, ``python -m
+controllers.mpc_bench``, on the 2-core development machine while it was shared (load
+average 5-6, i.e. about a third of a core for us; an idle machine should be ~2x faster)::
 
-The default solver is the fastest robust one of these (see :data:`SOLVERS`).
+    back-end                                 median us   p99 us   TCP RMS error
+    casadi.Opti('conic') re-built per call     ~40 000      -      (FACTS.md)
+    osqp_piqp  (default, see below)              1 056     5 603   0.29 mm
+    osqp_direct (OSQP 1.x, setup once, update)   1 109     5 690   0.29 mm
+    piqp       (casadi.conic, via buffer)        3 238     8 256   0.27 mm
+    osqp       (casadi.conic, eps 1e-4)          1 257     6 217   2.05 mm
+    qrqp       (casadi.conic)                    3 908    11 175   0.27 mm
+    proxqp     (casadi.conic)                    6 518    12 588   0.27 mm
+    hpipm      (casadi.conic, OCP form with u_prev in the state, 581 vars, 9 IPM iters)
+                                               ~2 200 (solver alone)
+    fatrop (conic) asserted inside CasADi, daqp needs a strictly convex H: not usable.
+
+OSQP (ADMM, warm-started, ~15 iterations, one KKT refactorization per call because H
+changes with J) is the fastest while few constraints are active, but it stalls (2000
+iterations, 30-70 ms) when many velocity / position limits are active at once (unreachable
+goals).  PIQP (proximal interior point) is slower but its iteration count hardly depends on
+the active set and it never failed.  The default ``osqp_piqp`` runs OSQP with at most 60
+iterations and, when it has not converged, re-solves the same data with PIQP: nominal
+tracking as above; with many limits active (goal out of reach / below the base) the median
+was 1.8-7 ms and p99 10-17 ms under the same load (no failures).  Those saturated cases miss
+the 5 ms p99 goal on a loaded machine: keep ``max_solve_ms`` at or below the MPC period, and
+the fallback below handles a late solve.
 
 Fallback: on a solver exception, a non-success status, a non-finite solution or a solve
 slower than ``max_solve_ms``, :meth:`TaskSpaceMPC.solve` returns the previous plan re-timed
@@ -74,13 +101,11 @@ import numpy as np
 from controllers.robot_description import HOME_Q_RAD, JointLimits
 
 N_JOINTS = 7
-_NX = 3 * N_JOINTS  # state (q, dq, u_prev)
-_NU = N_JOINTS  # control: joint accelerations
 
 #: Solver back-ends understood by :class:`MPCConfig.solver`. ``"osqp_direct"`` drives OSQP 1.x
 #: itself (set up once on the CasADi sparsity, then ``update()``); the others go through
 #: ``casadi.conic`` with the named plugin.
-SOLVERS: tuple[str, ...] = ("hpipm", "osqp_direct", "osqp", "fatrop", "piqp", "proxqp", "qrqp")
+SOLVERS: tuple[str, ...] = ("osqp_piqp", "osqp_direct", "piqp", "osqp", "qrqp", "proxqp")
 
 
 @dataclass(frozen=True)
@@ -99,6 +124,10 @@ class MPCConfig:
         w_jerk: weight of the acceleration change between steps (including from the
             previously applied acceleration), s^4/rad^2.
         w_terminal_vel: weight of the terminal joint velocity, s^2/rad^2.
+        max_ref_dist_m: each position reference is pulled toward the current TCP position to at
+            most this distance, m (the linearization is not meaningful farther away, and a far
+            goal otherwise makes the QP badly scaled; the direction is kept).
+        max_ref_angle_rad: the same for the orientation references, rad.
         q_margin_rad: the position limits are shrunk by this much on each side, rad.
         v_limit_scale: fraction of the velocity limits used by the plan.
         a_limit_scale: fraction of the acceleration limits used by the plan.
@@ -118,10 +147,12 @@ class MPCConfig:
     w_acc: float = 1.0e-3
     w_jerk: float = 1.0e-3
     w_terminal_vel: float = 1.0e-1
+    max_ref_dist_m: float = 0.2
+    max_ref_angle_rad: float = 0.5
     q_margin_rad: float = 0.05
     v_limit_scale: float = 0.95
     a_limit_scale: float = 0.95
-    solver: str = "hpipm"
+    solver: str = "osqp_piqp"
     max_solve_ms: float = 10.0
     solver_options: tuple[tuple[str, Any], ...] = ()
 
@@ -134,6 +165,8 @@ class MPCConfig:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         if not (0.0 < self.v_limit_scale <= 1.0 and 0.0 < self.a_limit_scale <= 1.0):
             raise ValueError("v_limit_scale and a_limit_scale must be in (0, 1]")
+        if not (self.max_ref_dist_m > 0.0 and self.max_ref_angle_rad > 0.0):
+            raise ValueError("max_ref_dist_m and max_ref_angle_rad must be > 0")
         if self.q_margin_rad < 0.0:
             raise ValueError("q_margin_rad must be >= 0")
         for name in ("w_pos", "w_rot", "w_posture", "w_vel", "w_acc", "w_jerk", "w_terminal_vel"):
@@ -188,8 +221,8 @@ class MPCPlan:
         if tau >= n * self.dt_s:
             return self.q_rad[n].copy(), np.zeros(N_JOINTS), np.zeros(N_JOINTS)
         tau = max(tau, 0.0)
-        k = min(int(tau // self.dt_s), n - 1)
-        s = tau - k * self.dt_s
+        k = min(int(np.floor(tau / self.dt_s + 1e-9)), n - 1)  # robust at the knots
+        s = max(tau - k * self.dt_s, 0.0)
         a = self.ddq_rad_s2[k]
         q = self.q_rad[k] + self.dq_rad_s[k] * s + 0.5 * a * s * s
         dq = self.dq_rad_s[k] + a * s
@@ -228,8 +261,17 @@ def braking_accelerations(dq0_rad_s: np.ndarray, a_max_rad_s2: np.ndarray, n_ste
 
 
 class _QPBuilder:
-    """Builds the parametric QP once with CasADi SX (fixed sparsity) in OCP order
-    ``[x0 u0 x1 u1 ... x_N]`` with the constraints ``[gap0 gap1 ... gap_{N-1} lincon_N]``."""
+    """Builds the parametric QP once with CasADi SX (fixed sparsity).
+
+    Decision vector ``z = [u_0, q_1, dq_1, u_1, q_2, dq_2, ..., u_{N-1}, q_N, dq_N]`` (the
+    current state is a parameter, not a variable); constraints ``[dynamics (2*7*N rows) = 0;
+    terminal braking set (7 rows)]`` plus simple bounds on every variable.  ``eval_fun`` maps
+    the parameter vector to one dense vector holding, in this order, the nonzeros of
+    ``triu(H)`` (CSC order), ``g``, the nonzeros of ``A`` (CSC order), ``lba``, ``uba``,
+    ``lbx``, ``ubx``; it is evaluated through ``Function.buffer()`` straight into numpy
+    memory (converting CasADi DMs to numpy costs ~0.3 ms per call here, the SX evaluation
+    itself ~30 us after common-subexpression elimination).
+    """
 
     def __init__(self, cfg: MPCConfig, limits: JointLimits) -> None:
         n, dt, nj = cfg.horizon_steps, cfg.dt_s, N_JOINTS
@@ -253,47 +295,45 @@ class _QPBuilder:
         r_ref = ca.SX.sym("r_ref", 3, n)  # rotvec reference relative to the current orientation, rad
         q_nom = ca.SX.sym("q_nom", nj)
         params = [q0, dq0, u_prev, jac, e_pos, r_ref, q_nom]
-        self.param_sizes = [int(p.numel()) for p in params]
         p_all = ca.vertcat(*[ca.vec(p) for p in params])
+        self.n_params = int(p_all.numel())
 
-        xs = [ca.SX.sym(f"x{k}", _NX) for k in range(n + 1)]
-        us = [ca.SX.sym(f"u{k}", _NU) for k in range(n)]
-        z_parts: list[ca.SX] = []
-        for k in range(n):
-            z_parts += [xs[k], us[k]]
-        z_parts.append(xs[n])
-        z = ca.vertcat(*z_parts)
+        us = [ca.SX.sym(f"u{k}", nj) for k in range(n)]
+        qs = [ca.SX.sym(f"q{k + 1}", nj) for k in range(n)]
+        dqs = [ca.SX.sym(f"dq{k + 1}", nj) for k in range(n)]
+        z = ca.vertcat(*[ca.vertcat(us[k], qs[k], dqs[k]) for k in range(n)])
+        stride = 3 * nj
+        self.u_idx = (np.arange(n)[:, None] * stride + np.arange(nj)[None, :]).ravel()
 
         jl, ja = jac[0:3, :], jac[3:6, :]
         cost = 0
         gaps = []
+        q_prev, dq_prev, u_before = q0, dq0, u_prev
         for k in range(n):
-            qk, dqk, upk = xs[k][0:nj], xs[k][nj : 2 * nj], xs[k][2 * nj :]
-            uk = us[k]
-            x_next = ca.vertcat(qk + dt * dqk + 0.5 * dt * dt * uk, dqk + dt * uk, uk)
-            gaps.append(x_next - xs[k + 1])
-            cost += cfg.w_acc * ca.sumsqr(uk) + cfg.w_jerk * ca.sumsqr(uk - upk)
-            q1, dq1 = xs[k + 1][0:nj], xs[k + 1][nj : 2 * nj]
+            uk, q1, dq1 = us[k], qs[k], dqs[k]
+            gaps.append(q_prev + dt * dq_prev + 0.5 * dt * dt * uk - q1)
+            gaps.append(dq_prev + dt * uk - dq1)
+            cost += cfg.w_acc * ca.sumsqr(uk) + cfg.w_jerk * ca.sumsqr(uk - u_before)
             dqq = q1 - q0
             cost += cfg.w_pos * ca.sumsqr(jl @ dqq - e_pos[:, k])
             cost += cfg.w_rot * ca.sumsqr(ja @ dqq - r_ref[:, k])
             cost += cfg.w_posture * ca.sumsqr(q1 - q_nom) + cfg.w_vel * ca.sumsqr(dq1)
-        qn, dqn = xs[n][0:nj], xs[n][nj : 2 * nj]
-        cost += cfg.w_terminal_vel * ca.sumsqr(dqn)
-        g_con = ca.vertcat(*gaps, qn + c_brake * dqn)
-        self.n_eq = n * _NX
+            q_prev, dq_prev, u_before = q1, dq1, uk
+        cost += cfg.w_terminal_vel * ca.sumsqr(dqs[-1])
+        g_con = ca.vertcat(*gaps, qs[-1] + c_brake * dqs[-1])
         self.n_con = int(g_con.numel())
+        self.nz = int(z.numel())
 
         hess, grad = ca.hessian(cost, z)
-        grad0 = ca.substitute(grad, z, ca.DM.zeros(z.numel()))
+        zero = ca.DM.zeros(self.nz)
+        grad0 = ca.substitute(grad, z, zero)
         a_mat = ca.jacobian(g_con, z)
-        # sanity: the dynamics and constraint functions are linear homogeneous in z
-        assert ca.depends_on(a_mat, z) is False and ca.depends_on(hess, z) is False
+        b_con = -ca.substitute(g_con, z, zero)  # g_con = A z - b
+        assert not ca.depends_on(a_mat, z) and not ca.depends_on(hess, z)
 
-        # bounds (the feasibility guard: widen each bound to contain the braking trajectory)
-        inf = np.inf
-        qb, vb = [q0], [dq0]
+        # bounds; feasibility guard: widen them to contain the maximal-braking trajectory
         qk, vk = q0, dq0
+        qb, vb = [], []
         for _ in range(n):
             ak = -ca.sign(vk) * ca.fmin(a_max, ca.fabs(vk) / dt)
             qk = qk + dt * vk + 0.5 * dt * dt * ak
@@ -301,109 +341,61 @@ class _QPBuilder:
             qb.append(qk)
             vb.append(vk)
         eps = 1e-9
-        lbx_parts, ubx_parts = [], []
-        for k in range(n + 1):
-            if k == 0:
-                lbx_parts.append(ca.vertcat(q0, dq0, u_prev))
-                ubx_parts.append(ca.vertcat(q0, dq0, u_prev))
-            else:
-                lbx_parts.append(ca.vertcat(ca.fmin(q_lo, qb[k] - eps), ca.fmin(-v_max, vb[k] - eps), -inf * np.ones(nj)))
-                ubx_parts.append(ca.vertcat(ca.fmax(q_hi, qb[k] + eps), ca.fmax(v_max, vb[k] + eps), inf * np.ones(nj)))
-            if k < n:
-                lbx_parts.append(ca.DM(-a_max))
-                ubx_parts.append(ca.DM(a_max))
-        lbx = ca.vertcat(*lbx_parts)
-        ubx = ca.vertcat(*ubx_parts)
-        term_b = qb[n] + c_brake * vb[n]
-        lba = ca.vertcat(ca.DM.zeros(self.n_eq), ca.fmin(q_lo, term_b - eps))
-        uba = ca.vertcat(ca.DM.zeros(self.n_eq), ca.fmax(q_hi, term_b + eps))
+        lbx = ca.vertcat(*[ca.vertcat(-a_max, ca.fmin(q_lo, qb[k] - eps), ca.fmin(-v_max, vb[k] - eps)) for k in range(n)])
+        ubx = ca.vertcat(*[ca.vertcat(a_max, ca.fmax(q_hi, qb[k] + eps), ca.fmax(v_max, vb[k] + eps)) for k in range(n)])
+        term_b = qb[-1] + c_brake * vb[-1]
+        n_dyn = 2 * nj * n
+        lba = b_con + ca.vertcat(ca.DM.zeros(n_dyn), ca.fmin(q_lo, term_b - eps))
+        uba = b_con + ca.vertcat(ca.DM.zeros(n_dyn), ca.fmax(q_hi, term_b + eps))
 
-        self.nz = int(z.numel())
         self.h_sp = hess.sparsity()
         self.a_sp = a_mat.sparsity()
         hess_triu = ca.triu(hess)
         self.h_triu_sp = hess_triu.sparsity()
-        # dense-vector outputs of the nonzeros: cheap to convert to numpy
-        self.qp_fun = ca.Function(
-            "mpc_qp",
-            [p_all],
-            [hess, grad0, a_mat, lba, uba, lbx, ubx],
-            ["p"],
-            ["h", "g", "a", "lba", "uba", "lbx", "ubx"],
-        )
-        self.qp_nz_fun = ca.Function(
-            "mpc_qp_nz",
-            [p_all],
-            [ca.vertcat(*hess_triu.nonzeros()), grad0, ca.vertcat(*a_mat.nonzeros()), lba, uba, lbx, ubx],
-        )
-        self.n_params = int(p_all.numel())
-
-    def pack(self, q0, dq0, u_prev, jac, e_pos, r_ref, q_nom) -> np.ndarray:
-        """Parameter vector (column-major for the matrices, as ``ca.vec``)."""
-        return np.concatenate(
-            [q0, dq0, u_prev, jac.ravel(order="F"), e_pos.ravel(), r_ref.ravel(), q_nom]
-        )
+        #: symbolic QP data (for the conic back-ends, which take sparse matrices)
+        self.qp_fun = ca.Function("mpc_qp", [p_all], [hess, grad0, a_mat, lba, uba, lbx, ubx],
+                                  ["p"], ["h", "g", "a", "lba", "uba", "lbx", "ubx"])
+        parts = [ca.vertcat(*hess_triu.nonzeros()), grad0, ca.vertcat(*a_mat.nonzeros()), lba, uba, lbx, ubx]
+        self.part_sizes = [int(p.numel()) for p in parts]
+        self.eval_fun = ca.Function("mpc_qp_vec", [p_all], [ca.cse(ca.vertcat(*parts))])
 
 
-class _ConicBackend:
-    """``casadi.conic`` with a given plugin, created once on the fixed sparsity."""
+class _Evaluator:
+    """Zero-copy evaluation of a one-input / one-output CasADi Function into numpy buffers."""
 
-    def __init__(self, qp: _QPBuilder, plugin: str, options: dict[str, Any]) -> None:
-        opts: dict[str, Any] = {"error_on_fail": False, "verbose": False}
-        n = qp.n
-        if plugin in ("hpipm", "fatrop"):
-            opts.update(N=n, nx=[_NX] * (n + 1), nu=[_NU] * n + [0], ng=[0] * n + [N_JOINTS])
-            if plugin == "fatrop":
-                opts["structure_detection"] = "manual"
-        if plugin == "hpipm":
-            opts["hpipm"] = {"warm_start": False, "iter_max": 50, "mode": "speed"}
-        elif plugin == "osqp":
-            opts["osqp"] = {"verbose": False, "eps_abs": 1e-5, "eps_rel": 1e-5, "polishing": True,
-                            "max_iter": 4000}
-            opts["warm_start_primal"] = True
-            opts["warm_start_dual"] = True
-        elif plugin == "fatrop":
-            opts["fatrop"] = {"print_level": 0}
-        elif plugin == "qrqp":
-            opts["print_iter"] = False
-            opts["print_header"] = False
-            opts["print_info"] = False
-        elif plugin in ("piqp", "proxqp"):
-            pass
-        opts.update(options)
-        self.solver = ca.conic("mpc_" + plugin, plugin, {"h": qp.h_sp, "a": qp.a_sp}, opts)
-        self.fun = qp.qp_fun
-        self.x_prev: np.ndarray | None = None
-        self.lam_x: np.ndarray | None = None
-        self.lam_a: np.ndarray | None = None
+    def __init__(self, fun: ca.Function) -> None:
+        self.fun = fun
+        self.arg = np.zeros(fun.nnz_in(0))
+        self.res = [np.zeros(fun.nnz_out(i)) for i in range(fun.n_out())]
+        self._buf, self._trigger = fun.buffer()
+        self._buf.set_arg(0, memoryview(self.arg))
+        for i, r in enumerate(self.res):
+            self._buf.set_res(i, memoryview(r))
 
-    def solve(self, p: np.ndarray) -> tuple[np.ndarray, bool]:
-        h, g, a, lba, uba, lbx, ubx = self.fun(p)
-        args = dict(h=h, g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-        if self.x_prev is not None:
-            args.update(x0=self.x_prev, lam_x0=self.lam_x, lam_a0=self.lam_a)
-        res = self.solver(**args)
-        ok = bool(self.solver.stats().get("success", False))
-        x = np.asarray(res["x"]).ravel()
-        if ok and np.all(np.isfinite(x)):
-            self.x_prev, self.lam_x, self.lam_a = res["x"], res["lam_x"], res["lam_a"]
-        return x, ok
+    def __call__(self, p: np.ndarray) -> list[np.ndarray]:
+        self.arg[:] = p
+        self._trigger()
+        return self.res
 
 
 class _OSQPBackend:
-    """OSQP 1.x driven directly: set up once on the CasADi sparsity ([A; I] for the bounds),
-    then ``update()`` the values and re-solve warm-started."""
+    """OSQP 1.x driven directly: set up once on the CasADi sparsity (``[A; I]`` carries the
+    simple bounds), then ``update()`` the values and re-solve warm-started."""
 
     def __init__(self, qp: _QPBuilder, options: dict[str, Any]) -> None:
-        import osqp  # local: only this backend needs it
+        import osqp  # local: only this back-end needs it
         import scipy.sparse as sp
 
-        self.fun = qp.qp_nz_fun
-        nz = qp.nz
-        p0 = np.zeros(qp.n_params)
-        hx, g, ax, lba, uba, lbx, ubx = (np.asarray(v).ravel() for v in self.fun(p0))
+        self._eval = _Evaluator(qp.eval_fun)
+        nz, nj = qp.nz, N_JOINTS
+        sizes = np.cumsum([0] + qp.part_sizes)
+        self._slices = [slice(int(a), int(b)) for a, b in zip(sizes[:-1], sizes[1:])]
+        # set up on a representative parameter (dense Jacobian) so no structural nonzero is 0
+        p_setup = np.zeros(qp.n_params)
+        p_setup[3 * nj : 3 * nj + 6 * nj] = 0.1
+        hx, g, ax, lba, uba, lbx, ubx = self._split(self._eval(p_setup))
         hs, as_ = qp.h_triu_sp, qp.a_sp
-        self._P = sp.csc_matrix((hx + 0.0, np.asarray(hs.row()), np.asarray(hs.colind())), shape=(nz, nz))
+        p_mat = sp.csc_matrix((hx.copy(), np.asarray(hs.row()), np.asarray(hs.colind())), shape=(nz, nz))
         # [A; I] assembled by hand so that the position of every value in the CSC data is known
         a_ptr = np.asarray(as_.colind())
         a_row = np.asarray(as_.row())
@@ -412,30 +404,110 @@ class _OSQPBackend:
         indptr = a_ptr + np.arange(nz + 1)
         indices = np.empty(a_row.size + nz, dtype=np.int64)
         indices[self._a_pos] = a_row
-        eye_pos = a_ptr[1:] + np.arange(nz)
-        indices[eye_pos] = qp.n_con + np.arange(nz)
+        indices[a_ptr[1:] + np.arange(nz)] = qp.n_con + np.arange(nz)
         self._a_data = np.ones(a_row.size + nz)
         self._a_data[self._a_pos] = ax
         a_full = sp.csc_matrix((self._a_data.copy(), indices, indptr), shape=(qp.n_con + nz, nz))
-        settings = dict(verbose=False, warm_starting=True, polishing=True, eps_abs=1e-5, eps_rel=1e-5,
-                        max_iter=4000, adaptive_rho=True, check_termination=10)
+        self._a_last = ax.copy()
+        self._l = np.empty(qp.n_con + nz)
+        self._u = np.empty(qp.n_con + nz)
+        settings = dict(verbose=False, warm_starting=True, polishing=False, eps_abs=1e-4, eps_rel=1e-4,
+                        max_iter=2000, adaptive_rho=True, check_termination=5)
         settings.update(options)
         self.solver = osqp.OSQP()
-        l = np.concatenate([lba, lbx])
-        u = np.concatenate([uba, ubx])
-        self.solver.setup(P=self._P, q=g, A=a_full, l=np.maximum(l, -1e30), u=np.minimum(u, 1e30), **settings)
+        self._fill_bounds(lba, uba, lbx, ubx)
+        self.solver.setup(P=p_mat, q=g, A=a_full, l=self._l, u=self._u, **settings)
+        self.last_iter = 0
+        self.last_status = 0
+
+    def _split(self, vec: list[np.ndarray]) -> list[np.ndarray]:
+        return [vec[0][s] for s in self._slices]
+
+    def _fill_bounds(self, lba, uba, lbx, ubx) -> None:
+        m = lba.size
+        self._l[:m], self._l[m:] = lba, lbx
+        self._u[:m], self._u[m:] = uba, ubx
+        np.clip(self._l, -1e30, 1e30, out=self._l)
+        np.clip(self._u, -1e30, 1e30, out=self._u)
 
     def solve(self, p: np.ndarray) -> tuple[np.ndarray, bool]:
-        hx, g, ax, lba, uba, lbx, ubx = (np.asarray(v).ravel() for v in self.fun(p))
-        a_full = self._a_data
-        a_full[self._a_pos] = ax
-        l = np.maximum(np.concatenate([lba, lbx]), -1e30)
-        u = np.minimum(np.concatenate([uba, ubx]), 1e30)
-        self.solver.update(Px=hx, q=g, Ax=a_full, l=l, u=u)
-        res = self.solver.solve()
-        status = res.info.status_val
-        ok = status in (1, 2)  # solved, solved inaccurate
+        hx, g, ax, lba, uba, lbx, ubx = self._split(self._eval(p))
+        self._fill_bounds(lba, uba, lbx, ubx)
+        if np.array_equal(ax, self._a_last):
+            self.solver.update(Px=hx, q=g, l=self._l, u=self._u)
+        else:  # not expected with this formulation (A is constant), kept for safety
+            self._a_data[self._a_pos] = ax
+            self._a_last = ax.copy()
+            self.solver.update(Px=hx, q=g, Ax=self._a_data, l=self._l, u=self._u)
+        res = self.solver.solve(raise_error=False)
+        self.last_iter = int(res.info.iter)
+        self.last_status = int(res.info.status_val)
+        ok = self.last_status in (1, 2)  # solved / solved inaccurate
         return np.asarray(res.x, dtype=float), ok
+
+
+class _ConicBackend:
+    """``casadi.conic`` with a given plugin, created once on the fixed sparsity and wrapped with
+    the QP-data function into one MX Function evaluated through ``buffer()`` (no DM
+    conversions).  Success = finite and primal feasible to ``feas_tol`` (the conic stats are
+    not reachable from inside an MX graph)."""
+
+    def __init__(self, qp: _QPBuilder, plugin: str, options: dict[str, Any]) -> None:
+        opts: dict[str, Any] = {"error_on_fail": False}
+        if plugin == "osqp":
+            opts["osqp"] = {"verbose": False, "eps_abs": 1e-4, "eps_rel": 1e-4, "polishing": False}
+            opts["warm_start_primal"] = True
+            opts["warm_start_dual"] = True
+        elif plugin == "qrqp":
+            opts.update(print_iter=False, print_header=False, print_info=False)
+        elif plugin == "piqp":
+            opts["piqp"] = {"verbose": False}
+        opts.update(options)
+        self.feas_tol = 1e-3
+        solver = ca.conic("mpc_" + plugin, plugin, {"h": qp.h_sp, "a": qp.a_sp}, opts)
+        p = ca.MX.sym("p", qp.n_params)
+        x0 = ca.MX.sym("x0", qp.nz)
+        lam_x0 = ca.MX.sym("lam_x0", qp.nz)
+        lam_a0 = ca.MX.sym("lam_a0", qp.n_con)
+        h, g, a, lba, uba, lbx, ubx = qp.qp_fun(p)
+        r = solver(h=h, g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=x0, lam_x0=lam_x0, lam_a0=lam_a0)
+        ax = ca.mtimes(a, r["x"])
+        viol = ca.mmax(ca.vertcat(lba - ax, ax - uba, lbx - r["x"], r["x"] - ubx))
+        packed = ca.vertcat(r["x"], r["lam_x"], r["lam_a"], viol)
+        inputs = ca.vertcat(p, x0, lam_x0, lam_a0)
+        fun = ca.Function("mpc_conic_" + plugin, [inputs], [packed])
+        self._eval = _Evaluator(fun)
+        self._np, self._nz, self._nc = qp.n_params, qp.nz, qp.n_con
+        self._warm = np.zeros(2 * qp.nz + qp.n_con)
+
+    def solve(self, p: np.ndarray) -> tuple[np.ndarray, bool]:
+        out = self._eval(np.concatenate([p, self._warm]))[0]
+        x = out[: self._nz].copy()
+        viol = out[-1]
+        ok = bool(np.all(np.isfinite(out)) and viol <= self.feas_tol)
+        if ok:
+            self._warm[:] = out[:-1]
+        return x, ok
+
+
+class _HybridBackend:
+    """OSQP first (cheap when few constraints are active, warm-started); when it does not reach
+    ``solved`` within ``osqp_max_iter`` iterations (it stalls when many velocity / position
+    limits are active at once), the same QP is re-solved by PIQP (a proximal interior-point
+    method whose iteration count hardly depends on the active set)."""
+
+    def __init__(self, qp: _QPBuilder, options: dict[str, Any]) -> None:
+        osqp_opts = {"max_iter": 60, **options}
+        self.osqp = _OSQPBackend(qp, osqp_opts)
+        self.piqp = _ConicBackend(qp, "piqp", {})
+        self.piqp_calls = 0
+
+    def solve(self, p: np.ndarray) -> tuple[np.ndarray, bool]:
+        x, ok = self.osqp.solve(p)
+        if ok and self.osqp.last_status == 1:
+            return x, True
+        self.piqp_calls += 1
+        return self.piqp.solve(p)
 
 
 def _as_array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
@@ -449,6 +521,12 @@ def _as_array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: contains NaN or inf")
     return arr
+
+
+def _clamp_rows(vecs: np.ndarray, max_norm: float) -> np.ndarray:
+    """Scale the rows of ``vecs`` whose norm exceeds ``max_norm`` down to ``max_norm``."""
+    norms = np.linalg.norm(vecs, axis=1, keepdims=True)
+    return vecs * np.minimum(1.0, max_norm / np.maximum(norms, 1e-300))
 
 
 def _as_sequence(name: str, value: Any, n: int) -> np.ndarray:
@@ -491,13 +569,13 @@ class TaskSpaceMPC:
         self._qp = _QPBuilder(config, limits)
         self._a_max = self._qp.a_max
         opts = dict(config.solver_options)
-        if config.solver == "osqp_direct":
-            self._backend: _ConicBackend | _OSQPBackend = _OSQPBackend(self._qp, opts)
+        if config.solver == "osqp_piqp":
+            self._backend: _ConicBackend | _OSQPBackend | _HybridBackend = _HybridBackend(self._qp, opts)
+        elif config.solver == "osqp_direct":
+            self._backend = _OSQPBackend(self._qp, opts)
         else:
             self._backend = _ConicBackend(self._qp, config.solver, opts)
-        n = config.horizon_steps
-        stride = _NX + _NU
-        self._u_idx = (np.arange(n)[:, None] * stride + _NX + np.arange(_NU)[None, :]).ravel()
+        self._u_idx = self._qp.u_idx
         self.solves = 0
         self.failures = 0
         self.late = 0
@@ -548,13 +626,15 @@ class TaskSpaceMPC:
         self.solves += 1
         prev = self.last_plan
         u_prev = prev.sample(t_s)[2] if prev is not None else np.zeros(N_JOINTS)
-        params = np.concatenate([q0, dq0, u_prev, jac.ravel(order="F"), (pos_ref - p0).ravel(), rot_ref.ravel(),
+        e_pos = _clamp_rows(pos_ref - p0, self.config.max_ref_dist_m)
+        e_rot = _clamp_rows(rot_ref, self.config.max_ref_angle_rad)
+        params = np.concatenate([q0, dq0, u_prev, jac.ravel(order="F"), e_pos.ravel(), e_rot.ravel(),
                                  self.q_nominal_rad])
         try:
             z, ok = self._backend.solve(params)
         except Exception:  # noqa: BLE001 - any solver error means: fall back
             z, ok = np.full(self._qp.nz, np.nan), False
-        u = z[self._u_idx].reshape(n, _NU) if z.size == self._qp.nz else np.full((n, _NU), np.nan)
+        u = z[self._u_idx].reshape(n, N_JOINTS) if z.size == self._qp.nz else np.full((n, N_JOINTS), np.nan)
         if not ok or not np.all(np.isfinite(u)):
             self.failures += 1
             return self._fallback(t_s, q0, dq0, p0, jac, t_start)
