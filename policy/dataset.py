@@ -1,0 +1,116 @@
+"""Reads the dataset written by ``python -m scenarios.collect`` (format in the issue / README).
+
+A directory with ``meta.json`` and shards ``shard_XXXX.npz``; each shard holds N_i samples of
+``images (N,V,H,W,3) uint8``, ``future_images`` (same), ``q_rad (N,7)``, ``actions (N,16,7)``
+(float, not quantized), ``instructions``, ``questions``, ``answers`` (str), ``target_index (N,)``,
+``target_pos_m (N,3)``. Every problem is reported with the file and field it concerns.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+META_KEYS = ("image_size_px", "camera_names", "chunk_horizon", "chunk_dt_s", "action_bounds", "action_bins", "future_dt_s")
+SHARD_FIELDS = (
+    "images", "future_images", "q_rad", "actions", "instructions", "questions", "answers", "target_index", "target_pos_m",
+)
+
+
+class DatasetError(ValueError):
+    """The dataset directory does not match the expected format."""
+
+
+def read_meta(path: str | Path) -> dict[str, Any]:
+    path = Path(path)
+    meta_path = path / "meta.json"
+    if not meta_path.is_file():
+        raise DatasetError(f"{path}: no meta.json (is this a directory written by scenarios.collect?)")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as e:
+        raise DatasetError(f"{meta_path}: not valid JSON: {e}") from None
+    missing = [k for k in META_KEYS if k not in meta]
+    if missing:
+        raise DatasetError(f"{meta_path}: missing keys {missing}")
+    b = meta["action_bounds"]
+    if len(b.get("low", [])) != 7 or len(b.get("high", [])) != 7:
+        raise DatasetError(f"{meta_path}: action_bounds need 7 'low' and 7 'high' values")
+    return meta
+
+
+def shard_paths(path: str | Path) -> list[Path]:
+    shards = sorted(Path(path).glob("shard_*.npz"))
+    if not shards:
+        raise DatasetError(f"{path}: no shard_XXXX.npz files")
+    return shards
+
+
+def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
+    """One shard as a dict of arrays, shapes and dtypes checked against ``meta``."""
+    try:
+        with np.load(shard, allow_pickle=False) as z:
+            missing = [f for f in SHARD_FIELDS if f not in z.files]
+            if missing:
+                raise DatasetError(f"{shard}: missing fields {missing}")
+            data = {f: z[f] for f in SHARD_FIELDS}
+    except DatasetError:
+        raise
+    except Exception as e:  # zip / pickle / truncation errors
+        raise DatasetError(f"{shard}: unreadable shard: {type(e).__name__}: {e}") from None
+    n = len(data["images"])
+    s, v, h = meta["image_size_px"], len(meta["camera_names"]), meta["chunk_horizon"]
+    expect = {
+        "images": (n, v, s, s, 3), "future_images": (n, v, s, s, 3), "q_rad": (n, 7), "actions": (n, h, 7),
+        "instructions": (n,), "questions": (n,), "answers": (n,), "target_index": (n,), "target_pos_m": (n, 3),
+    }
+    for f, shape in expect.items():
+        if data[f].shape != shape:
+            raise DatasetError(f"{shard}: field {f!r} has shape {data[f].shape}, expected {shape}")
+    for f in ("images", "future_images"):
+        if data[f].dtype != np.uint8:
+            raise DatasetError(f"{shard}: field {f!r} must be uint8, got {data[f].dtype}")
+    for f in ("instructions", "questions", "answers"):
+        if data[f].dtype.kind not in "UO":
+            raise DatasetError(f"{shard}: field {f!r} must hold strings, got {data[f].dtype}")
+        data[f] = data[f].astype(str)
+    for f in ("q_rad", "actions", "target_pos_m"):
+        if not np.all(np.isfinite(data[f])):
+            raise DatasetError(f"{shard}: field {f!r} contains NaN or inf")
+    return data
+
+
+@dataclass
+class PolicyDataset:
+    """All shards concatenated in memory (images as uint8)."""
+
+    meta: dict[str, Any]
+    data: dict[str, np.ndarray]
+
+    @classmethod
+    def load(cls, path: str | Path, fields: tuple[str, ...] = SHARD_FIELDS) -> "PolicyDataset":
+        meta = read_meta(path)
+        parts = [read_shard(s, meta) for s in shard_paths(path)]
+        data = {f: np.concatenate([p[f] for p in parts]) for f in fields}
+        n = len(data[fields[0]])
+        if "n_samples" in meta and meta["n_samples"] != n:
+            raise DatasetError(f"{path}: meta.json says n_samples={meta['n_samples']} but the shards hold {n}")
+        return cls(meta=meta, data=data)
+
+    def __len__(self) -> int:
+        return len(next(iter(self.data.values())))
+
+
+def split_indices(n: int, val_fraction: float, split_seed: int, max_val: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic (train, held-out) index split; the same for every stage and training seed."""
+    perm = np.random.default_rng(split_seed).permutation(n)
+    n_val = min(max_val, int(round(n * val_fraction)))
+    if n >= 2:
+        n_val = max(1, min(n_val, n - 1))
+    else:
+        n_val = 0
+    return np.sort(perm[n_val:]), np.sort(perm[:n_val])

@@ -1,0 +1,83 @@
+"""Decoding of the target segment: parallel (one pass / k-step confidence re-masking) and autoregressive.
+
+All decoders take a filled batch ``(B, L)`` whose target positions hold ``<|mask|>`` where unknown
+and a given token where known (inpainting / real-time chunking). Known positions are never
+changed. Logits are restricted to the id range of the layout's target modality, so the result
+holds only tokens of that kind. Decoding is greedy (argmax), hence deterministic.
+
+- ``decode_parallel(steps=1)``: every unknown position filled from ONE forward pass (mm2a default).
+- ``decode_parallel(steps=k)``: MaskGIT-style: after pass ``s`` the ``ceil(n * cos(pi/2 * s/k))``
+  least confident predictions are masked again (cosine schedule); t2i and mmu use this.
+- ``decode_autoregressive``: one position per forward pass, left to right, for comparison.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from policy.model import MMActModel
+from policy.sequence import SeqLayout
+
+
+def cosine_masked_count(n_unknown: int, step: int, steps: int) -> int:
+    """Positions still masked after ``step`` (1-based) of ``steps``: ``floor(n * cos(pi/2 * step/steps))``."""
+    if step >= steps:
+        return 0
+    return int(math.floor(n_unknown * math.cos(math.pi / 2 * step / steps)))
+
+
+@torch.no_grad()
+def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, steps: int = 1) -> torch.Tensor:
+    """Fill the masked target positions in ``steps`` passes; returns a new ``(B, L)`` tensor."""
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    mask_id = model.vocab.mask_id
+    lo, _ = model.vocab.range_of(layout.target_modality)
+    idx = torch.as_tensor(layout.target_idx, device=tokens.device)
+    out = tokens.clone()
+    tgt = out[:, idx]
+    unknown0 = tgt == mask_id  # (B, T)
+    n0 = unknown0.sum(1)  # per sample
+    for s in range(1, steps + 1):
+        unknown = out[:, idx] == mask_id
+        if not bool(unknown.any()):
+            break
+        logits = model.target_logits(out, layout)
+        prob, pred = logits.float().softmax(-1).max(-1)
+        pred = pred + lo
+        cur = out[:, idx]
+        filled = torch.where(unknown, pred, cur)
+        if s < steps:
+            keep_masked = torch.tensor([cosine_masked_count(int(n), s, steps) for n in n0], device=tokens.device)
+            conf = torch.where(unknown, prob, torch.full_like(prob, float("inf")))
+            order = conf.argsort(dim=1)  # least confident first
+            rank = torch.empty_like(order)
+            rank.scatter_(1, order, torch.arange(order.shape[1], device=tokens.device).expand_as(order))
+            remask = unknown & (rank < keep_masked[:, None])
+            filled = torch.where(remask, torch.full_like(filled, mask_id), filled)
+        out[:, idx] = filled
+    return out
+
+
+@torch.no_grad()
+def decode_autoregressive(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout) -> torch.Tensor:
+    """Fill the masked target positions one per forward pass, left to right."""
+    mask_id = model.vocab.mask_id
+    lo, _ = model.vocab.range_of(layout.target_modality)
+    out = tokens.clone()
+    for pos in layout.target_idx:
+        col = out[:, pos]
+        unknown = col == mask_id
+        if not bool(unknown.any()):
+            continue
+        h = model.hidden(out, layout)[:, pos]
+        pred = model.logits(h, layout.target_modality).argmax(-1) + lo
+        out[:, pos] = torch.where(unknown, pred, col)
+    return out
+
+
+def target_tokens(tokens: torch.Tensor, layout: SeqLayout) -> torch.Tensor:
+    """The target segment ``(B, T)`` of a decoded batch."""
+    return tokens[:, torch.as_tensor(layout.target_idx, device=tokens.device)]

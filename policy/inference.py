@@ -1,0 +1,138 @@
+"""Inference API for the control stack: ``MMActPolicy.load(path).predict_chunk(images, instruction, q_rad)``.
+
+One ``<|mm2a|>`` call tokenizes the frames (VQ encoder), the instruction (BPE) and the joint
+angles (uniform bins over the Panda limits), then fills the whole ``H x 7`` action chunk in ONE
+forward pass (``action_steps=1``) or in ``k`` confidence re-masking passes. ``known_actions``
+fixes some chunk tokens (real-time chunking / inpainting) and fills in the rest.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from policy.action_tokenizer import ActionTokenizer
+from policy.bundle import PolicyBundle
+from policy.decoding import decode_autoregressive, decode_parallel, target_tokens
+
+DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "mmact_small.pt"
+
+
+class MMActPolicy:
+    """A trained unified-token policy (greedy, deterministic decoding)."""
+
+    def __init__(self, bundle: PolicyBundle) -> None:
+        if bundle.model is None:
+            raise ValueError("MMActPolicy needs a bundle with model weights")
+        self.bundle = bundle
+        self.model = bundle.model.eval()
+
+    @classmethod
+    def load(cls, path: str | Path = DEFAULT_CHECKPOINT, device: str = "cpu") -> "MMActPolicy":
+        """Load a checkpoint (raises ``policy.checkpoint.CheckpointError`` naming any problem)."""
+        return cls(PolicyBundle.load(path, device))
+
+    # ---- properties the control stack reads ------------------------------
+    @property
+    def action_tokenizer(self) -> ActionTokenizer:
+        return self.bundle.action_tokenizer
+
+    @property
+    def chunk_dt_s(self) -> float:
+        """Spacing of the chunk's waypoints in seconds."""
+        return self.bundle.chunk_dt_s
+
+    @property
+    def horizon(self) -> int:
+        return self.bundle.model_cfg.horizon
+
+    @property
+    def device(self) -> torch.device:
+        return self.bundle.device
+
+    # ---- input handling ----------------------------------------------------
+    def _codes(self, images: np.ndarray) -> np.ndarray:
+        img = np.asarray(images)
+        if img.ndim == 3:
+            img = img[None]
+        if img.ndim != 4 or img.shape[-1] != 3 or img.dtype != np.uint8:
+            raise ValueError(f"images must be uint8 (V, H, W, 3), got {img.shape} {img.dtype}")
+        if not 1 <= img.shape[0] <= self.bundle.model_cfg.max_views:
+            raise ValueError(f"got {img.shape[0]} views; this model takes 1..{self.bundle.model_cfg.max_views}")
+        return self.bundle.image_codes(img[None])  # (1, V, g, g)
+
+    def _text(self, text: str) -> np.ndarray:
+        return self.bundle.text_batch([text], self.bundle.model_cfg.max_text_len)
+
+    def mm2a_batch(self, images: np.ndarray, instruction: str, q_rad: np.ndarray,
+                   known_actions: np.ndarray | None = None):
+        """(tokens tensor (1, L), layout) of an mm2a query with the chunk masked (or partly known)."""
+        q = np.asarray(q_rad, dtype=np.float64).reshape(-1)
+        if q.shape != (self.bundle.model_cfg.state_dim,):
+            raise ValueError(f"q_rad must have {self.bundle.model_cfg.state_dim} values, got shape {np.shape(q_rad)}")
+        state = self.bundle.state_tokens(q[None])
+        toks, lay = self.bundle.builder.fill("mm2a", self._text(instruction), self._codes(images), state, None)
+        if known_actions is not None:
+            h, d = self.horizon, self.bundle.model_cfg.action_dim
+            known = np.asarray(known_actions)
+            if known.shape != (h, d) or not np.issubdtype(known.dtype, np.integer):
+                raise ValueError(f"known_actions must be int ({h}, {d}) with -1 = unknown, got {known.shape} {known.dtype}")
+            lo, hi = self.model.vocab.range_of("action")
+            bad = (known != -1) & ((known < lo) | (known >= hi))
+            if bad.any():
+                raise ValueError(f"known_actions holds token {int(known[bad][0])} outside the action range [{lo}, {hi})")
+            flat = known.reshape(-1)
+            tgt = toks[0, lay.target_idx]
+            toks[0, lay.target_idx] = np.where(flat >= 0, flat, tgt)
+        return torch.as_tensor(toks, device=self.device), lay
+
+    # ---- the three tasks -----------------------------------------------------
+    @torch.no_grad()
+    def predict_chunk(self, images: np.ndarray, instruction: str, q_rad: np.ndarray, action_steps: int = 1,
+                      known_actions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """mm2a: frames ``(V, H, W, 3)`` uint8 + instruction + joint angles (rad) -> action chunk.
+
+        Returns ``(tokens (H, 7) int64 in the shared vocabulary, actions (H, 7) float64 bin centres)``.
+        ``action_steps=1`` fills the chunk in one forward pass; ``k > 1`` re-masks the least
+        confident tokens on a cosine schedule. ``known_actions`` (H, 7) int64, -1 = unknown: the
+        known tokens are kept and the rest inpainted.
+        """
+        toks, lay = self.mm2a_batch(images, instruction, q_rad, known_actions)
+        out = target_tokens(decode_parallel(self.model, toks, lay, action_steps), lay)[0].cpu().numpy()
+        tokens = out.reshape(self.horizon, -1).astype(np.int64)
+        return tokens, self.action_tokenizer.decode(tokens)
+
+    @torch.no_grad()
+    def predict_chunk_autoregressive(self, images: np.ndarray, instruction: str, q_rad: np.ndarray
+                                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The same chunk decoded one token per forward pass, left to right (for comparison)."""
+        toks, lay = self.mm2a_batch(images, instruction, q_rad)
+        out = target_tokens(decode_autoregressive(self.model, toks, lay), lay)[0].cpu().numpy()
+        tokens = out.reshape(self.horizon, -1).astype(np.int64)
+        return tokens, self.action_tokenizer.decode(tokens)
+
+    @torch.no_grad()
+    def answer(self, images: np.ndarray, question: str, steps: int = 4) -> str:
+        """mmu: frames + question -> answer text (iterative re-masking, cosine schedule)."""
+        toks, lay = self.bundle.builder.fill("mmu", self._text(question), self._codes(images), None, None)
+        out = target_tokens(decode_parallel(self.model, torch.as_tensor(toks, device=self.device), lay, steps), lay)
+        ids = out[0].cpu().numpy() - self.model.vocab.text_offset
+        return self.bundle.text_tokenizer.decode(ids).strip()
+
+    @torch.no_grad()
+    def predict_future_codes(self, images: np.ndarray, instruction: str, steps: int = 8) -> np.ndarray:
+        """t2i: frames + instruction -> future image codes ``(V, grid, grid)`` int64, raw codebook indices.
+
+        Decode them to pixels with ``policy.bundle.image_tokenizer.decode``.
+        """
+        codes = self._codes(images)
+        toks, lay = self.bundle.builder.fill("t2i", self._text(instruction), codes, None, None)
+        out = target_tokens(decode_parallel(self.model, torch.as_tensor(toks, device=self.device), lay, steps), lay)
+        g = self.bundle.model_cfg.grid
+        return (out[0].cpu().numpy() - self.model.vocab.image_offset).reshape(codes.shape[1], g, g).astype(np.int64)
+
+    def decode_image_codes(self, codes: np.ndarray) -> np.ndarray:
+        """Codes ``(V, grid, grid)`` -> uint8 frames ``(V, H, W, 3)``."""
+        return self.bundle.image_tokenizer.decode(np.asarray(codes))
