@@ -106,6 +106,14 @@ class _Axis3:
             self.offset, self.offset_vel, self.offset_acc = self._zeros, self._zeros, self._zeros
         return ref + self.offset, ref_vel + self.offset_vel, self.offset_acc
 
+    def preview_offset(self, taus_s: np.ndarray) -> np.ndarray:
+        """relative mode: the offset (N, 3) the current Ruckig plan will have ``taus_s`` from now."""
+        if not (np.any(self.offset) or np.any(self.offset_vel) or np.any(self.offset_acc)):
+            return np.zeros((len(taus_s), 3))
+        traj = self.out.trajectory
+        duration = traj.duration
+        return np.array([traj.at_time(min(float(t), duration))[0] if t < duration else (0.0, 0.0, 0.0) for t in taus_s])
+
     def step(self, target_pos: np.ndarray, target_vel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         inp = self.inp
         inp.target_position = target_pos.tolist()
@@ -134,6 +142,10 @@ class TaskSpaceSmoother:
         self.config = config
         self._pos = _Axis3(config.dt_s, config.v_max_m_s, config.a_max_m_s2, config.j_max_m_s3)
         self._rot = _Axis3(config.dt_s, config.w_max_rad_s, config.dw_max_rad_s2, config.ddw_max_rad_s3)
+
+    def preview_pos_offset(self, taus_s: np.ndarray) -> np.ndarray:
+        """relative mode: position offsets (N, 3) of the smoothed reference ``taus_s`` from now."""
+        return self._pos.preview_offset(taus_s)
 
     @property
     def failures(self) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from controllers.mpc import MPCConfig
 from controllers.qp_id import QPConfig
 from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
@@ -28,6 +29,9 @@ class StackConfig:
             next chunk is computed are given to the source as known and the rest is filled in, so chunks
             join without a jump; ``hybrid``: ours, Kalman-filtered retargeting + Ruckig + QP.
         use_ruckig: hybrid only: smooth the reference with Ruckig.
+        use_mpc: hybrid only: a CasADi MPC between Ruckig and the QP previews the reference
+            (retargeted chunk + predicted target) over ``mpc.horizon_steps * mpc.dt_s`` within
+            joint limits, re-solved at ``mpc.rate_hz``; the QP tracks its plan.
         retarget: hybrid only: the retargeting rule and trust radius.
         replan_hz: how often the chunk source is queried, Hz.
         latency_ms: inference latency: a chunk observed at t0 becomes active at t0 + latency.
@@ -41,6 +45,7 @@ class StackConfig:
 
     mode: str = "hybrid"
     use_ruckig: bool = True
+    use_mpc: bool = True
     retarget: RetargetConfig = field(default_factory=RetargetConfig)
     replan_hz: float = 1.0
     latency_ms: float = 200.0
@@ -53,6 +58,7 @@ class StackConfig:
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
+    mpc: MPCConfig = field(default_factory=MPCConfig)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:

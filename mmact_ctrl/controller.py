@@ -6,10 +6,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from controllers.mpc import MPCPlan, TaskSpaceMPC
 from controllers.qp_id import TaskReference, TaskSpaceQP
 from controllers.retarget import retarget_offset, trusted
 from controllers.robot_model import PandaModel, RobotTerms
-from controllers.rotations import rot_from_rotvec, rotvec_from_rot
+from controllers.rotations import orientation_error, rot_from_rotvec, rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
 from controllers.target_filter import TargetFilter
 from mmact_ctrl.chunk import ActionChunk
@@ -39,6 +40,12 @@ class HybridController:
         self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=config.dt_s))
         self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
         self.hybrid = config.mode == "hybrid"
+        self.use_mpc = self.hybrid and config.use_mpc
+        self.mpc = TaskSpaceMPC(config.mpc, q_nominal_rad=self.model.home_q_rad) if self.use_mpc else None
+        self._mpc_period_s = 1.0 / config.mpc.rate_hz
+        self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
+        self._plan: MPCPlan | None = None
+        self._next_mpc_s = 0.0
         self.q_post = self.model.home_q_rad
         _, self.rot_nominal = self.model.fk(self.q_post)
         self.active: ChunkReference | None = None
@@ -59,6 +66,10 @@ class HybridController:
         self.filter = TargetFilter(self.filter.config)
         self.qp.failures = 0
         self.qp.solves = 0
+        self._plan = None
+        self._next_mpc_s = 0.0
+        if self.mpc is not None:
+            self.mpc = TaskSpaceMPC(self.config.mpc, q_nominal_rad=self.model.home_q_rad)
         self.active = None
         self.ensemble = []
         self._trusted = False
@@ -119,6 +130,15 @@ class HybridController:
             pos, vel = pos + offset, vel + offset_vel
         return pos, vel, action[3:6], rate[3:6], float(action[6])
 
+    def _solve_mpc(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms, rot_des: np.ndarray) -> MPCPlan:
+        """Preview the reference over the MPC horizon (retargeted chunk, predicted target, and the
+        Ruckig offset still to be smoothed away) and plan within the joint limits."""
+        taus = self._mpc_taus
+        preview = np.array([self.reference(t_s + tau)[0] for tau in taus])
+        if self.config.use_ruckig and self.config.smoother.relative:
+            preview = preview + self.smoother.preview_pos_offset(taus)
+        return self.mpc.solve(t_s, q_rad, dq_rad_s, terms.pos_m, terms.J, preview, orientation_error(rot_des, terms.rot))
+
     def tick(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
         """One control period: torques for the measured joint state."""
         terms = self.model.terms(q_rad, dq_rad_s)
@@ -128,14 +148,22 @@ class HybridController:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
         else:
             acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)
+        rot = rot_from_rotvec(rotvec, self.rot_nominal)
+        q_post = self.q_post
+        if self.use_mpc:
+            if t_s >= self._next_mpc_s - 1e-9:
+                self._plan = self._solve_mpc(t_s, q_rad, dq_rad_s, terms, rot)
+                self._next_mpc_s = t_s + self._mpc_period_s
+            pos, vel, acc = self._plan.sample_task(t_s)
+            q_post = self._plan.sample(t_s)[0]
         ref = TaskReference(
             pos_m=pos,
             vel_m_s=vel,
             acc_m_s2=acc,
-            rot=rot_from_rotvec(rotvec, self.rot_nominal),
+            rot=rot,
             ang_vel_rad_s=ang_vel,
             ang_acc_rad_s2=ang_acc,
-            q_post_rad=self.q_post,
+            q_post_rad=q_post,
         )
         tau = self.qp.solve(terms, q_rad, dq_rad_s, ref)
         return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=pos, ee_pos_m=terms.pos_m)

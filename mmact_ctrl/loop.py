@@ -36,6 +36,7 @@ class EpisodeLog:
     jump_times_s: tuple[float, ...] = ()
     qp_failures: int = 0
     smoother_failures: int = 0
+    mpc_failures: int = 0
     clipped_actions: int = 0
     wall_s: float = 0.0
     instruction: str = ""
@@ -169,5 +170,7 @@ def run_episode(
     log.wall_s = time.perf_counter() - wall0
     log.qp_failures = controller.qp.failures
     log.smoother_failures = controller.smoother.failures
+    if controller.mpc is not None:
+        log.mpc_failures = controller.mpc.failures + controller.mpc.late
     log.jump_times_s = tuple(t for t in world.target_jump_times_s() if t <= cfg.duration_s)
     return log

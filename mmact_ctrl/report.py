@@ -17,6 +17,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("chunk-switch acc [m/s^2]", "chunk_jump_acc_m_s2", "{:.2f}"),
     ("limit violations", "limit_violations", "{:d}"),
     ("QP failures", "qp_failures", "{:d}"),
+    ("MPC failures/late", "mpc_failures", "{:d}"),
     ("tick median [us]", "tick_us.median", "{:.0f}"),
     ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
     ("real-time factor", "realtime_factor", "{:.1f}x"),

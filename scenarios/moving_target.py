@@ -83,6 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--ensemble-decay", type=_number(float, "--ensemble-decay", 0), default=1.0,
                    help="temporal_ensemble: weight exp(-decay * age difference in s), oldest chunk weighs most")
     g.add_argument("--no-ruckig", action="store_true", help="hybrid: track the retargeted reference without Ruckig smoothing")
+    g.add_argument("--no-mpc", action="store_true",
+                   help="hybrid: no MPC between Ruckig and the QP (the QP tracks the smoothed reference directly)")
     g.add_argument("--retarget", choices=RULES, default="displacement",
                    help="hybrid: displacement shifts the chunk by how far the filtered target moved since the observation; "
                         "snap pulls the chunk's aim onto the filtered target (also removes aim and quantization error); none")
@@ -118,6 +120,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
     return StackConfig(
         mode=mode,
         use_ruckig=not args.no_ruckig,
+        use_mpc=not args.no_mpc,
         retarget=RetargetConfig(rule=args.retarget, trust_radius_m=args.trust_radius_m),
         replan_hz=args.replan_hz,
         latency_ms=args.latency_ms,
