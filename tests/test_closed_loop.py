@@ -114,3 +114,33 @@ def test_quantization_alone_costs_under_2_mm_on_a_static_target():
     assert abs(q["final_error_m"] - f["final_error_m"]) < 0.002
     coarse = _run("open_loop", "static", [5], duration_s=3.0, bins=8)[0]
     assert coarse["final_error_m"] > q["final_error_m"] + 0.005  # 8 bins really are coarse
+
+
+def test_mpc_in_the_loop_keeps_limits_and_a_failed_solve_falls_back():
+    world = SimWorld(SceneConfig(), TargetSpec(kind="circle", speed_m_s=0.2), noise_m=0.002, dropout=0.1)
+    source = ScriptedExpert(tokenizer=ActionTokenizer(bins=2048))
+    cfg = StackConfig(mode="hybrid", use_mpc=True, duration_s=4.0)
+    ok = HybridController(cfg)
+    log = run_episode(world, source, ok, seed=2)
+    m = episode_metrics(log)
+    assert ok.mpc.solves >= 190 and ok.mpc.failures == 0
+    assert m["limit_violations"] == 0 and m["success"]
+    # now every third MPC solve raises inside the solver: fallbacks are counted, the arm stays safe
+    broken = HybridController(cfg)
+    inner = broken.mpc._backend.solve
+    calls = [0]
+
+    def flaky(params):
+        calls[0] += 1
+        if calls[0] % 3 == 0:
+            raise RuntimeError("injected solver failure")
+        return inner(params)
+
+    broken.mpc._backend.solve = flaky
+    log = run_episode(world, source, broken, seed=2)
+    m2 = episode_metrics(log)
+    assert broken.mpc.failures >= 60
+    assert m2["mpc_failures"] == broken.mpc.failures + broken.mpc.late
+    assert m2["limit_violations"] == 0 and m2["qp_failures"] == 0
+    assert m2["final_error_m"] < 0.05
+    world.close()
