@@ -163,7 +163,8 @@ def run_episode(
         log.dq_rad_s[k] = state.dq_rad_s
         log.tau_cmd_nm[k] = out.tau_nm
         if frame_every and k % frame_every == 0:
-            log.frames.append(world.render()[0])
+            render_video = getattr(world, "render_video", None)  # optional: a larger frame for videos
+            log.frames.append(render_video() if render_video else world.render()[0])
         world.step(out.tau_nm, out.gripper_m)
         if progress is not None and k % 500 == 0:
             progress(k / n)

@@ -88,6 +88,7 @@ class SimWorld:
         self._motions: list[TargetMotion] = []
         self._meas_rng: np.random.Generator | None = None
         self._renderer: mujoco.Renderer | None = None
+        self._video_renderer: mujoco.Renderer | None = None
         self._kinematics_stale = True
 
     # ---------------------------------------------------------------- episode
@@ -221,6 +222,19 @@ class SimWorld:
             frames.append(self._renderer.render())
         return np.stack(frames)
 
+    def render_video(self, size_px: int = 320, camera: str | None = None) -> np.ndarray:
+        """One larger frame ``(H, W, 3)`` for videos (its own renderer, so the policy's frames keep their size)."""
+        self._require_reset()
+        size_px = min(int(size_px), 640)
+        if self._video_renderer is None or self._video_renderer.height != min(size_px, 480):
+            if self._video_renderer is not None:
+                self._video_renderer.close()
+            self._video_renderer = mujoco.Renderer(self.model, height=min(size_px, 480), width=size_px)
+        self._refresh_kinematics()
+        mujoco.mj_camlight(self.model, self.data)
+        self._video_renderer.update_scene(self.data, camera=camera or self.scene.camera_names[0])
+        return self._video_renderer.render()
+
     def target_jump_times_s(self) -> tuple[float, ...]:
         """Times (s) at which the instructed object teleports this episode."""
         self._require_reset()
@@ -234,9 +248,11 @@ class SimWorld:
 
     def close(self) -> None:
         """Free the renderer (the world stays usable; a later ``render`` makes a new one)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        for name in ("_renderer", "_video_renderer"):
+            renderer = getattr(self, name)
+            if renderer is not None:
+                renderer.close()
+                setattr(self, name, None)
 
     def __enter__(self) -> "SimWorld":
         return self
