@@ -35,6 +35,7 @@ class StackConfig:
         retarget: hybrid only: the retargeting rule and trust radius.
         replan_hz: how often the chunk source is queried, Hz.
         latency_ms: inference latency: a chunk observed at t0 becomes active at t0 + latency.
+        measured_latency: use each chunk's measured inference time as its latency instead of ``latency_ms``.
         bins: action bins of the tokenizer (0 = no quantization).
         dt_s: physics and control period, s.
         perception_hz: target measurement rate, Hz.
@@ -49,6 +50,7 @@ class StackConfig:
     retarget: RetargetConfig = field(default_factory=RetargetConfig)
     replan_hz: float = 1.0
     latency_ms: float = 200.0
+    measured_latency: bool = False
     bins: int = 2048
     dt_s: float = 0.001
     perception_hz: float = 100.0

@@ -34,6 +34,8 @@ class EpisodeLog:
     chunk_active_s: list[float] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     jump_times_s: tuple[float, ...] = ()
+    objects_pos_m: np.ndarray | None = None  # (n, n_objects, 3) when the world has several objects
+    target_index: int = 0
     qp_failures: int = 0
     smoother_failures: int = 0
     mpc_failures: int = 0
@@ -116,6 +118,11 @@ def run_episode(
         tick_us=np.empty(n),
         instruction=world.instruction,
     )
+    objects_fn = getattr(world, "objects_pos_m", None)  # optional part of the world: distractors
+    n_objects = len(objects_fn()) if objects_fn is not None else 1
+    if n_objects > 1:
+        log.objects_pos_m = np.empty((n, n_objects, 3))
+        log.target_index = int(getattr(world, "target_index", 0))
     pending: deque[tuple[float, ActionChunk, np.ndarray | None]] = deque()
     next_plan_s = 0.0
     mode = cfg.mode
@@ -142,7 +149,8 @@ def run_episode(
                 chunk = source.plan(obs)
             log.plan_ms.append((time.perf_counter() - p0) * 1e3)
             log.clipped_actions += chunk.n_clipped
-            pending.append((t + latency_s, chunk, controller.target_estimate()))
+            delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
+            pending.append((t + delay_s, chunk, controller.target_estimate()))
             if mode == "receding":  # the next query is set when this chunk starts running
                 next_plan_s = float("inf")
             else:
@@ -158,6 +166,8 @@ def run_episode(
         log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + perception_us
         log.ee_pos_m[k] = state.ee_pos_m
         log.target_pos_m[k] = world.target_pos_m()
+        if log.objects_pos_m is not None:
+            log.objects_pos_m[k] = objects_fn()
         log.ref_pos_m[k] = out.ref_pos_m
         log.q_rad[k] = state.q_rad
         log.dq_rad_s[k] = state.dq_rad_s

@@ -9,6 +9,8 @@
   ``jerk_rate_hz`` (100 Hz: the jerk of the motion, not of the 1 kHz torque steps).
 - limit_violations: control ticks with a measured joint position outside its limits, a measured
   joint velocity above its limit, or a commanded torque above the effort limit (before any clipping).
+- wrong_object: the TCP held within the success radius of an object that was not instructed.
+- policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
 - jump recovery: for each target teleport whose 1 s window ends inside the episode, whether the
   TCP got within the success radius of the new goal within ``jump_window_s`` (1 s), and how long it took.
@@ -72,6 +74,13 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         lo, hi = max(0, i - 5), min(len(acc_n), i + 5)
         if hi > lo:
             switch_acc.append(float(acc_n[lo:hi].max()))
+    wrong_object = False
+    if log.objects_pos_m is not None:
+        for j in range(log.objects_pos_m.shape[1]):
+            if j == log.target_index:
+                continue
+            near = np.linalg.norm(log.ee_pos_m - log.objects_pos_m[:, j], axis=1) < config.success_radius_m
+            wrong_object |= _first_hold_start(near, hold_n) is not None
     violations = limit_violation_mask(log, tol=config.limit_tol)
     recovered, recovery_s = [], []
     for tj in log.jump_times_s:
@@ -88,6 +97,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "seed": int(log.seed),
         "instruction": log.instruction,
         "success": start is not None,
+        "wrong_object": bool(wrong_object),
         "time_to_reach_s": float(start * dt) if start is not None else float("nan"),
         "final_error_m": float(err[-1]),
         "mean_error_m": float(err.mean()),
@@ -102,6 +112,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "tick_us_median": float(np.median(log.tick_us)),
         "tick_us_p99": float(np.percentile(log.tick_us, 99)),
         "plan_ms_median": float(np.median(log.plan_ms)) if log.plan_ms else float("nan"),
+        "plan_ms": [float(x) for x in log.plan_ms],
         "realtime_factor": sim_s / log.wall_s if log.wall_s > 0 else float("nan"),
         "n_jumps": len(recovered),
         "jumps_recovered": int(sum(recovered)),
@@ -114,6 +125,12 @@ def _nanmedian(values: list[float]) -> float:
     return float(np.median(v)) if v.size else float("nan")
 
 
+def _median_p99(values: list[float]) -> dict:
+    if not values:
+        return {"median": float("nan"), "p99": float("nan")}
+    return {"median": float(np.median(values)), "p99": float(np.percentile(values, 99))}
+
+
 def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
     """Summary over episodes; ``tick_us`` pools the controller tick times of all episodes."""
     if not episodes:
@@ -123,6 +140,7 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
     return {
         "episodes": len(episodes),
         "success_rate": float(np.mean([e["success"] for e in episodes])),
+        "wrong_object_rate": float(np.mean([e.get("wrong_object", False) for e in episodes])),
         "final_error_m": float(np.mean([e["final_error_m"] for e in episodes])),
         "mean_error_m": float(np.mean([e["mean_error_m"] for e in episodes])),
         "time_to_reach_s": _nanmedian([e["time_to_reach_s"] for e in episodes]),
@@ -134,6 +152,7 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "mpc_failures": int(sum(e.get("mpc_failures", 0) for e in episodes)),
         "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),
         "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
+        "policy_latency_ms": _median_p99([x for e in episodes for x in e.get("plan_ms", [])]),
         "realtime_factor": float(np.mean([e["realtime_factor"] for e in episodes])),
         "jump_recovered_rate": float(sum(e["jumps_recovered"] for e in episodes) / n_jumps) if n_jumps else float("nan"),
         "jump_recovery_s": _nanmedian(recovery),

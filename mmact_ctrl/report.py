@@ -9,6 +9,7 @@ from pathlib import Path
 TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     # (label, summary key, format)
     ("success rate", "success_rate", "{:.0%}"),
+    ("wrong object", "wrong_object_rate", "{:.0%}"),
     ("final error [mm]", "final_error_m", "mm"),
     ("mean error [mm]", "mean_error_m", "mm"),
     ("time to reach [s]", "time_to_reach_s", "{:.2f}"),
@@ -21,6 +22,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("tick median [us]", "tick_us.median", "{:.0f}"),
     ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
     ("real-time factor", "realtime_factor", "{:.1f}x"),
+    ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),
     ("jumps recovered <1 s", "jump_recovered_rate", "{:.0%}"),
 )
 

@@ -31,6 +31,7 @@ from scenarios.targets import KINDS as TARGET_KINDS
 from scenarios.targets import TargetSpec
 
 PROG = "python -m scenarios.moving_target"
+DEFAULT_SOURCE = "expert"
 
 
 class _OneLineErrorParser(argparse.ArgumentParser):
@@ -59,6 +60,12 @@ def _number(kind, name: str, low: float | None = None, low_inclusive: bool = Tru
     return parse
 
 
+def _latency(text: str):
+    if text.strip().lower() == "measured":
+        return "measured"
+    return _number(float, "--latency-ms", 0)(text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _OneLineErrorParser(
         prog=PROG,
@@ -70,6 +77,14 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
+    src = p.add_argument_group("chunk source")
+    src.add_argument("--source", choices=("policy", "expert"), default=DEFAULT_SOURCE,
+                     help="policy: the shipped unified-token policy looks at the camera and reads the instruction; "
+                          "expert: the scripted expert sees the target where one frame shows it")
+    src.add_argument("--checkpoint", metavar="PATH", default=None,
+                     help="policy checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
+    src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=1,
+                     help="policy: decoding passes per chunk (1 = the whole chunk in one forward pass)")
     g = p.add_argument_group("execution")
     g.add_argument("--mode", nargs="+", choices=MODES, default=["open_loop", "hybrid"],
                    help="open_loop: dequantized waypoints interpolated and tracked by the QP, nothing else; "
@@ -92,14 +107,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="retargeting only applies when the target is within this distance of the chunk's aim")
     g.add_argument("--replan-hz", type=_number(float, "--replan-hz", 0, False), default=1.0,
                    help="how often the chunk source is queried (Hz)")
-    g.add_argument("--latency-ms", type=_number(float, "--latency-ms", 0), default=200.0,
-                   help="inference latency: a chunk observed at t0 becomes active at t0 + latency")
+    g.add_argument("--latency-ms", type=_latency, default=200.0,
+                   help="inference latency: a chunk observed at t0 becomes active at t0 + latency; 'measured' uses each "
+                        "chunk's measured inference time")
     g.add_argument("--bins", type=_number(int, "--bins", 0), default=2048,
                    help="action bins per dimension of the tokenizer (0 = no quantization)")
     g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=16, help="waypoints per chunk (H)")
     g.add_argument("--chunk-dt-s", type=_number(float, "--chunk-dt-s", 0, False), default=0.1, help="waypoint spacing (s)")
     w = p.add_argument_group("world")
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
+    w.add_argument("--objects", type=int, choices=(1, 2), default=2,
+                   help="objects in the scene (two differently coloured balls: the instruction names one)")
+    w.add_argument("--instruction", metavar="TEXT", default=None,
+                   help="a fixed instruction for every episode, naming one object by colour (default: a random "
+                        "phrasing naming a random object per episode)")
     w.add_argument("--speed", type=_number(float, "--speed", 0), default=0.2, help="target speed (m/s)")
     w.add_argument("--noise-m", type=_number(float, "--noise-m", 0), default=0.002,
                    help="standard deviation of the 100 Hz target measurement noise (m)")
@@ -123,7 +144,8 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         use_mpc=not args.no_mpc,
         retarget=RetargetConfig(rule=args.retarget, trust_radius_m=args.trust_radius_m),
         replan_hz=args.replan_hz,
-        latency_ms=args.latency_ms,
+        latency_ms=0.0 if args.latency_ms == "measured" else args.latency_ms,
+        measured_latency=args.latency_ms == "measured",
         bins=args.bins,
         duration_s=args.duration_s,
         receding_k=args.receding_k,
@@ -131,7 +153,11 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
     )
 
 
-def make_source(args: argparse.Namespace) -> ScriptedExpert:
+def make_source(args: argparse.Namespace):
+    if args.source == "policy":
+        from mmact_ctrl.policy_source import PolicyChunkSource
+
+        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps)
     tokenizer = None
     if args.bins:
         layout = VocabLayout(action_bins=args.bins)
@@ -148,8 +174,9 @@ def run(args: argparse.Namespace) -> dict:
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
     target = TargetSpec(kind=args.target, speed_m_s=args.speed)
-    world = SimWorld(SceneConfig(), target, noise_m=args.noise_m, dropout=args.dropout)
     source = make_source(args)
+    world = SimWorld(SceneConfig(n_objects=args.objects), target, noise_m=args.noise_m, dropout=args.dropout,
+                     instruction=args.instruction)
     runs: dict[str, dict] = {}
     first_logs = {}
     total = len(configs) * args.episodes
@@ -201,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     logs = payload.pop("_logs")
     print(
-        f"\n{args.target} target at {args.speed:g} m/s, replan {args.replan_hz:g} Hz, latency {args.latency_ms:g} ms, "
+        f"\n{args.source} source, {args.objects} object(s), {args.target} target at {args.speed:g} m/s, replan {args.replan_hz:g} Hz, latency {args.latency_ms if args.latency_ms == 'measured' else f'{args.latency_ms:g}'} ms, "
         f"{args.bins or 'no'} bins, {args.episodes} episodes x {args.duration_s:g} s per mode "
         f"({time.perf_counter() - t0:.1f} s wall)\n"
     )
@@ -212,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         from mmact_ctrl.plotting import plot_runs
 
-        title = f"{args.target} target {args.speed:g} m/s, replan {args.replan_hz:g} Hz, latency {args.latency_ms:g} ms, bins {args.bins}"
+        title = (f"{args.source}, {args.target} target {args.speed:g} m/s, replan {args.replan_hz:g} Hz, "
+                 f"latency {args.latency_ms} ms, bins {args.bins}")
         plot_runs(logs, args.plot, title=title)
         print(f"wrote {args.plot}")
     if args.video:

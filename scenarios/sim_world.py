@@ -44,6 +44,16 @@ INSTRUCTION_TEMPLATES: tuple[str, ...] = (
 MIN_OBJECT_SEPARATION_M = 0.15
 
 
+def instructed_index(instruction: str, n_objects: int) -> int:
+    """Which object an instruction names (by its colour); a clear error when it names none or several."""
+    words = instruction.lower().replace(",", " ").replace(".", " ").split()
+    named = [i for i, color in enumerate(TARGET_COLORS[:n_objects]) if color in words]
+    if len(named) != 1:
+        colors = ", ".join(TARGET_COLORS[:n_objects])
+        raise ValueError(f"instruction {instruction!r} must name exactly one object colour of this scene ({colors})")
+    return named[0]
+
+
 class SimWorld:
     """A simulated Panda on a table with one or two moving target spheres.
 
@@ -58,7 +68,8 @@ class SimWorld:
         dropout: probability that ``measure_target`` returns None.
     """
 
-    def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0) -> None:
+    def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0,
+                 instruction: str | None = None) -> None:
         if not isinstance(scene, SceneConfig):
             raise TypeError(f"scene must be a SceneConfig, got {type(scene).__name__}")
         if not isinstance(target, TargetSpec):
@@ -67,6 +78,8 @@ class SimWorld:
             raise ValueError(f"noise_m must be finite and >= 0 m, got {noise_m!r}")
         if not (0.0 <= dropout < 1.0):
             raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+        self.fixed_instruction = instruction
+        self.fixed_target_index = None if instruction is None else instructed_index(instruction, scene.n_objects)
         self.scene = scene
         self.target = target
         self.noise_m = float(noise_m)
@@ -114,9 +127,11 @@ class SimWorld:
                 raise RuntimeError(f"could not place two objects {MIN_OBJECT_SEPARATION_M} m apart (seed {seed})")
             motions.append(other)
         self._motions = motions
+        if target_index is None and self.fixed_target_index is not None:
+            target_index = self.fixed_target_index
         self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
         template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
-        self.instruction = template.format(color=TARGET_COLORS[self.target_index])
+        self.instruction = self.fixed_instruction or template.format(color=TARGET_COLORS[self.target_index])
         self._meas_rng = np.random.default_rng([int(seed), 1])
 
         m, d = self.model, self.data

@@ -20,6 +20,9 @@ BAD = [
     (["--dropout", "1.5"], "--dropout"),
     (["--latency-ms", "7000", "--duration-s", "6"], "latency_ms"),
     (["--replan-hz", "nan"], "--replan-hz"),
+    (["--instruction", "reach the green ball"], "instruction"),
+    (["--latency-ms", "soon"], "--latency-ms"),
+    (["--source", "policy", "--checkpoint", "/nonexistent/ckpt.pt"], "checkpoint"),
 ]
 
 
@@ -43,7 +46,7 @@ def test_json_and_plot_outputs(tmp_path, capsys):
     payload = json.loads(out_json.read_text())
     assert set(payload) >= {"config", "summary", "episodes"}
     s = payload["summary"]
-    for key in ("success_rate", "final_error_m", "time_to_reach_s", "tracking_ratio", "jerk_rms", "limit_violations",
+    for key in ("success_rate", "wrong_object_rate", "policy_latency_ms", "final_error_m", "time_to_reach_s", "tracking_ratio", "jerk_rms", "limit_violations",
                 "qp_failures", "tick_us", "realtime_factor", "jump_recovered_rate", "jump_recovery_s"):
         assert key in s
     assert set(s["tick_us"]) == {"median", "p99"}

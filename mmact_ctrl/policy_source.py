@@ -1,0 +1,59 @@
+"""The learned unified-token policy behind the ``ChunkSource`` contract."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mmact_ctrl.chunk import ActionChunk, Observation
+
+
+class PolicyChunkSource:
+    """``ChunkSource`` over ``policy.inference.MMActPolicy``: one ``<|mm2a|>`` call per chunk.
+
+    Args:
+        checkpoint: path of the trained checkpoint (``policy.inference.DEFAULT_CHECKPOINT`` if None).
+        action_steps: 1 = the whole chunk in one forward pass; k > 1 = k-step confidence re-masking.
+    """
+
+    needs_image = True
+
+    def __init__(self, checkpoint: str | Path | None = None, action_steps: int = 1, device: str = "cpu") -> None:
+        from policy.inference import DEFAULT_CHECKPOINT, MMActPolicy
+
+        path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINT
+        if not path.is_file():
+            raise ValueError(f"policy checkpoint {str(path)!r} does not exist (train one with python -m policy.train)")
+        if action_steps < 1:
+            raise ValueError(f"action_steps must be >= 1, got {action_steps}")
+        self.policy = MMActPolicy.load(path, device=device)
+        self.action_steps = int(action_steps)
+        self.checkpoint = path
+
+    @property
+    def chunk_dt_s(self) -> float:
+        return float(self.policy.chunk_dt_s)
+
+    def _chunk(self, tokens: np.ndarray, actions: np.ndarray, observation: Observation) -> ActionChunk:
+        return ActionChunk(waypoints=actions, dt_s=self.chunk_dt_s, t0_s=observation.t0_s, tokens=tokens)
+
+    def plan(self, observation: Observation) -> ActionChunk:
+        if observation.image is None:
+            raise ValueError("the policy needs the camera frame: Observation.image is None")
+        tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
+                                                    action_steps=self.action_steps)
+        return self._chunk(tokens, actions, observation)
+
+    def plan_inpaint(self, observation: Observation, known: np.ndarray) -> ActionChunk:
+        """Real-time chunking: the waypoints that run during inference enter as known (unmasked) action
+        tokens, the model fills in the rest in the same forward pass."""
+        known = np.asarray(known, dtype=np.float64).reshape(-1, 7)
+        n = min(len(known), self.policy.horizon)
+        if n == 0:
+            return self.plan(observation)
+        known_tokens = np.full((self.policy.horizon, 7), -1, dtype=np.int64)
+        known_tokens[:n] = self.policy.action_tokenizer.encode(known[:n])[0]
+        tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
+                                                    action_steps=self.action_steps, known_actions=known_tokens)
+        return self._chunk(tokens, actions, observation)
