@@ -93,6 +93,10 @@ class SimWorld:
         self.data = mujoco.MjData(self.model)
         self._arm_qpos = arm_qpos_adr(self.model)
         self._arm_dof = arm_dof_adr(self.model)
+        # the arm's addresses are contiguous: slices read faster than index arrays at 1 kHz
+        assert np.all(np.diff(self._arm_qpos) == 1) and np.all(np.diff(self._arm_dof) == 1)
+        self._arm_q_slice = slice(int(self._arm_qpos[0]), int(self._arm_qpos[-1]) + 1)
+        self._arm_v_slice = slice(int(self._arm_dof[0]), int(self._arm_dof[-1]) + 1)
         self._finger_qpos = finger_qpos_adr(self.model)
         self._arm_act = arm_actuator_ids(self.model)
         self._grip_act = gripper_actuator_id(self.model)
@@ -195,8 +199,8 @@ class SimWorld:
         d = self.data
         return RobotState(
             t_s=float(d.time),
-            q_rad=d.qpos[self._arm_qpos].copy(),
-            dq_rad_s=d.qvel[self._arm_dof].copy(),
+            q_rad=d.qpos[self._arm_q_slice].copy(),
+            dq_rad_s=d.qvel[self._arm_v_slice].copy(),
             gripper_m=float(d.qpos[self._finger_qpos].sum()),
             ee_pos_m=d.site_xpos[self._tcp].copy(),
         )
@@ -204,12 +208,12 @@ class SimWorld:
     def target_pos_m(self) -> np.ndarray:
         """Ground-truth position (3,) of the instructed object now, m."""
         self._require_reset()
-        return self._motions[self.target_index].pos_m(self.data.time)
+        return self.data.mocap_pos[self._mocap[self.target_index]].copy()  # placed at this time by step/reset
 
     def objects_pos_m(self) -> np.ndarray:
         """Positions (n_objects, 3) of all objects now, m (row ``target_index`` is the instructed one)."""
         self._require_reset()
-        return np.stack([motion.pos_m(self.data.time) for motion in self._motions])
+        return self.data.mocap_pos[self._mocap[: len(self._motions)]].copy()
 
     def measure_target(self) -> np.ndarray | None:
         """Truth + N(0, noise_m^2) per axis, or None with probability ``dropout``."""
