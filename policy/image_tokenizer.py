@@ -199,9 +199,9 @@ def train_image_tokenizer(
         opt.step()
         sched.step()
         if step % 20 == 0 or step == steps - 1:
-            bar.set_postfix(loss=f"{float(loss):.4f}", psnr=f"{stats['psnr_db']:.1f}", usage=f"{stats['code_usage']:.2f}")
+            bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{stats['psnr_db']:.1f}", usage=f"{stats['code_usage']:.2f}")
             if log is not None:
-                log.append({"step": step, "loss": float(loss), **stats})
+                log.append({"step": step, "loss": float(loss.detach()), **stats})
     tok.eval()
     stats["wall_s"] = time.perf_counter() - t0
     return stats
