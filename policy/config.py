@@ -155,6 +155,8 @@ class TrainConfig:
     grad_clip: float = 1.0
     weights: LossWeights = LossWeights()
     full_mask_prob_action: float = 0.5  # share of mm2a samples with the whole chunk masked (the one-pass case)
+    # action targets as a Gaussian over neighbouring bins (HL-Gauss, Farebrother et al. 2024); 0 = one-hot
+    action_label_sigma_bins: float = 16.0
     val_fraction: float = 0.1
     split_seed: int = 1234  # fixed across stages, so every stage holds out the same samples
     eval_samples: int = 256

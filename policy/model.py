@@ -9,6 +9,8 @@ modality being predicted, so a prediction is always a token of the right kind.
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -79,3 +81,23 @@ class MMActModel(nn.Module):
         if hi - lo != k:
             raise ValueError(f"codebook has {k} codes but the vocabulary's image range holds {hi - lo}")
         self.tok.weight[lo:hi] = e.to(self.tok.weight.device)
+
+    @torch.no_grad()
+    def init_action_embeddings(self, n_freqs: int | None = None) -> None:
+        """Start the action-bin rows as sinusoidal features of the bin index (nearby bins start similar).
+
+        The head is tied to the table, so the output over bins starts as a smooth function of the
+        hidden state: the model can move its prediction along the bin axis instead of learning
+        2048 unrelated classes (the ordinal structure that plain cross-entropy ignores).
+        """
+        lo, hi = self.vocab.range_of("action")
+        bins, d = hi - lo, self.cfg.d_model
+        n = n_freqs or d // 2
+        u = (torch.arange(bins, dtype=torch.float64) + 0.5) / bins
+        freqs = torch.logspace(0, math.log10(bins / 4), n, dtype=torch.float64)
+        feats = torch.cat([torch.sin(2 * math.pi * u[:, None] * freqs), torch.cos(2 * math.pi * u[:, None] * freqs)], 1)
+        feats = feats[:, :d]
+        if feats.shape[1] < d:
+            feats = torch.cat([feats, torch.zeros(bins, d - feats.shape[1], dtype=torch.float64)], 1)
+        feats = feats / feats.std() * 0.02
+        self.tok.weight[lo:hi] = feats.to(self.tok.weight)

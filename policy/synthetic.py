@@ -43,7 +43,9 @@ def _draw_disc(img: np.ndarray, row: float, col: float, r: float, colour) -> Non
     img[(yy + 0.5 - row) ** 2 + (xx + 0.5 - col) ** 2 <= r * r] = colour
 
 
-def make_samples(n: int, size_px: int = 96, n_views: int = 1, horizon: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
+def make_samples(n: int, size_px: int = 96, n_views: int = 1, horizon: int = 16, seed: int = 0,
+                 n_balls: tuple[int, int] = (2, 3)) -> dict[str, np.ndarray]:
+    """``n`` samples; each scene has ``n_balls[0]..n_balls[1]`` discs of distinct colours."""
     rng = np.random.default_rng(seed)
     names = list(COLOURS)
     out = {
@@ -54,7 +56,7 @@ def make_samples(n: int, size_px: int = 96, n_views: int = 1, horizon: int = 16,
     }
     instr, quest, ans = [], [], []
     for i in range(n):
-        k = int(rng.integers(2, 4))
+        k = int(rng.integers(n_balls[0], n_balls[1] + 1))
         colours = rng.choice(names, size=k, replace=False)
         pos: list[tuple[float, float]] = []
         while len(pos) < k:
@@ -101,13 +103,14 @@ def make_samples(n: int, size_px: int = 96, n_views: int = 1, horizon: int = 16,
             ans.append("left" if y < -0.1 else "right" if y > 0.1 else "center")
         else:
             quest.append("how many balls are there?")
-            ans.append({2: "two", 3: "three"}[k])
+            ans.append({1: "one", 2: "two", 3: "three", 4: "four"}[k])
     out["instructions"], out["questions"], out["answers"] = np.array(instr), np.array(quest), np.array(ans)
     return out
 
 
 def write_synthetic_dataset(
-    path: str | Path, n_samples: int, n_views: int = 1, shard_size: int = 1000, size_px: int = 96, seed: int = 0
+    path: str | Path, n_samples: int, n_views: int = 1, shard_size: int = 1000, size_px: int = 96, seed: int = 0,
+    n_balls: tuple[int, int] = (2, 3),
 ) -> Path:
     """Write ``meta.json`` + ``shard_XXXX.npz`` with ``n_samples`` synthetic samples; returns the path."""
     path = Path(path)
@@ -121,7 +124,8 @@ def write_synthetic_dataset(
     }
     for s, start in enumerate(range(0, n_samples, shard_size)):
         m = min(shard_size, n_samples - start)
-        np.savez_compressed(path / f"shard_{s:04d}.npz", **make_samples(m, size_px, n_views, horizon, seed=seed * 100003 + s))
+        np.savez_compressed(path / f"shard_{s:04d}.npz", **make_samples(m, size_px, n_views, horizon, seed=seed * 100003 + s,
+                                                                         n_balls=n_balls))
     (path / "meta.json").write_text(json.dumps(meta, indent=1))
     return path
 
@@ -133,8 +137,10 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=1)
     ap.add_argument("--shard-size", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--balls", default="2,3", help="min,max discs per scene (1,1 = pure localisation, no colour binding)")
     a = ap.parse_args()
-    print(write_synthetic_dataset(a.out, a.n, a.views, a.shard_size, seed=a.seed))
+    lo, hi = (int(x) for x in a.balls.split(","))
+    print(write_synthetic_dataset(a.out, a.n, a.views, a.shard_size, seed=a.seed, n_balls=(lo, hi)))
 
 
 if __name__ == "__main__":
