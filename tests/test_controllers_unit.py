@@ -68,7 +68,7 @@ def test_qp_failure_falls_back_and_counts(model):
 
 
 def test_ruckig_output_respects_its_limits():
-    cfg = SmootherConfig(v_max_m_s=0.8, a_max_m_s2=4.0, j_max_m_s3=50.0)
+    cfg = SmootherConfig(v_max_m_s=0.8, a_max_m_s2=4.0, j_max_m_s3=50.0, relative=False)
     sm = TaskSpaceSmoother(cfg)
     sm.reset(np.zeros(3), np.zeros(3))
     rng = np.random.default_rng(0)
@@ -132,9 +132,32 @@ def test_retarget_rules_and_trust_radius():
     snap = RetargetConfig("snap", 0.1)
     off0, _ = retarget_offset(snap, 0.5, aim, at_obs, now, vel, 0.5, 2.0)
     off1, _ = retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)
-    assert np.allclose(off0, 0) and np.allclose(aim + off1, now)
+    assert np.allclose(off0, now - at_obs)  # at activation: the displacement only
+    assert np.allclose(aim + off1, now)  # at the last waypoint: exactly on the filtered target
     assert trusted(disp, aim, at_obs)
     assert not trusted(disp, aim, aim + 0.2)  # not the chunk's target
     assert not trusted(RetargetConfig("none"), aim, at_obs)
     with pytest.raises(ValueError, match="rule"):
         RetargetConfig("teleport")
+
+
+def test_relative_ruckig_absorbs_reference_jumps_within_limits_and_follows_without_lag():
+    cfg = SmootherConfig(a_max_m_s2=6.0, j_max_m_s3=80.0)  # relative (default)
+    sm = TaskSpaceSmoother(cfg)
+    start = np.array([0.4, 0.0, 0.3])
+    sm.reset(start, np.zeros(3))
+    vel = np.array([0.2, -0.1, 0.0])
+    out_p, out_a = [], []
+    for k in range(3000):
+        t = k * cfg.dt_s
+        ref = start + vel * t + (np.array([0.05, 0.02, -0.03]) if t >= 1.0 else 0.0)  # a chunk switch at 1 s
+        p, v, a, *_ = sm.step(ref, vel, np.zeros(3), np.zeros(3))
+        out_p.append(p), out_a.append(a)
+    p, a = np.array(out_p), np.array(out_a)
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    assert step.max() < 1.5 * np.linalg.norm(vel) * cfg.dt_s + 1e-4  # the 6 cm jump never shows up as a jump
+    assert np.abs(a).max() <= cfg.a_max_m_s2 * (1 + 1e-6)
+    assert np.abs(np.diff(a, axis=0) / cfg.dt_s).max() <= cfg.j_max_m_s3 * (1 + 1e-3)
+    final_ref = start + vel * 2.999 + np.array([0.05, 0.02, -0.03])
+    assert np.linalg.norm(p[-1] - final_ref) < 1e-6  # no lag behind a moving reference
+    assert sm.failures == 0
