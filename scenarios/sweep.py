@@ -127,6 +127,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     m = episode_metrics(log)
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)
+    m.pop("plan_ms", None)  # per-chunk list; the row keeps plan_ms_median
     return {**cell, "duration_s": duration_s, **{k: v for k, v in m.items() if k != "seed"}}
 
 
