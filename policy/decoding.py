@@ -45,10 +45,12 @@ def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, 
         if not bool(unknown.any()):
             break
         logits = model.target_logits(out, layout)
-        prob, pred = logits.float().softmax(-1).max(-1)
-        pred = pred + lo
         cur = out[:, idx]
-        filled = torch.where(unknown, pred, cur)
+        if s == steps:  # last (or only) pass: no confidences needed
+            out[:, idx] = torch.where(unknown, logits.argmax(-1) + lo, cur)
+            break
+        prob, pred = logits.float().softmax(-1).max(-1)
+        filled = torch.where(unknown, pred + lo, cur)
         if s < steps:
             keep_masked = torch.tensor([cosine_masked_count(int(n), s, steps) for n in n0], device=tokens.device)
             conf = torch.where(unknown, prob, torch.full_like(prob, float("inf")))
