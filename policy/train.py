@@ -248,7 +248,8 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
             text_size = int(bundle.info.get("text_size", 512))
             mcfg = ModelConfig(text_size=text_size, image_codebook_size=bundle.image_cfg.codebook_size,
                                action_bins=bundle.action_tokenizer.bins, d_model=args.d_model, n_layers=args.layers,
-                               n_heads=args.heads, grid=bundle.image_cfg.grid, horizon=int(meta["chunk_horizon"]))
+                               n_heads=args.heads, grid=bundle.image_cfg.grid, horizon=int(meta["chunk_horizon"]),
+                               dropout=args.dropout or 0.0)
             model = bundle.attach_model(mcfg)
             model.init_image_embeddings(bundle.image_tokenizer.codebook, seed=args.seed)
             model.init_action_embeddings()
@@ -257,6 +258,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
                         text=w.text if args.w_text is None else args.w_text,
                         image=w.image if args.w_image is None else args.w_image)
         tc = TrainConfig(stage=args.stage, steps=args.steps or 2000, batch_size=args.batch_size or 32, lr=args.lr or 3e-4,
+                         weight_decay=0.01 if args.weight_decay is None else args.weight_decay,
                          warmup_steps=min(200, max(1, (args.steps or 2000) // 10)), weights=w, seed=args.seed,
                          eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins)
     check_data_matches(bundle, meta, args.init or resume_path)
@@ -264,6 +266,10 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     rng = np.random.default_rng(tc.seed)
     bundle.to(device)
     model = bundle.model
+    if args.dropout is not None:  # regularisation for this run only: inference runs in eval mode either way
+        for module in model.modules():
+            if isinstance(module, torch.nn.Dropout):
+                module.p = float(args.dropout)
     data = load_tokenized(bundle, args.data, not args.no_progress)
     n = len(data["img"])
     train_idx, val_idx = split_indices(n, tc.val_fraction, tc.split_seed)
@@ -394,6 +400,9 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--w-image", type=float, default=None)
     ap.add_argument("--action-sigma-bins", type=float, default=16.0,
                     help="std (bins) of the Gaussian soft action targets (HL-Gauss); 0 = plain one-hot cross-entropy")
+    ap.add_argument("--dropout", type=float, default=None,
+                    help="dropout inside the transformer during this run (default: the model's own, 0)")
+    ap.add_argument("--weight-decay", type=float, default=None, help="AdamW weight decay (default 0.01)")
     ap.add_argument("--d-model", type=int, default=192)
     ap.add_argument("--layers", type=int, default=4)
     ap.add_argument("--heads", type=int, default=6)

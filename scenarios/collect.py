@@ -32,7 +32,7 @@ from mmact_ctrl.loop import observe
 from policy.action_tokenizer import ActionBounds
 from scenarios.expert import ExpertConfig, ScriptedExpert, expert_actions
 from scenarios.panda_scene import TARGET_COLORS, SceneConfig
-from scenarios.targets import TargetSpec
+from scenarios.targets import TargetSpec, plane_workspace
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,8 @@ class CollectConfig:
     image_size_px: camera resolution.
     cameras: camera names.
     seed: seed of episode 0 (episode i uses seed + i).
+    plane_z_m: > 0: every object at this height (+ up to 2 cm), moving horizontally, so one camera
+        frame determines its position; 0: the full 3-D workspace.
     """
 
     episodes: int = 1000
@@ -62,6 +64,7 @@ class CollectConfig:
     image_size_px: int = 96
     cameras: tuple[str, ...] = ("front",)
     seed: int = 0
+    plane_z_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -74,6 +77,15 @@ class CollectConfig:
             raise ValueError(f"sample_every_s must be in (0, duration_s), got {self.sample_every_s}")
         if not self.future_dt_s > 0:
             raise ValueError(f"future_dt_s must be > 0, got {self.future_dt_s}")
+
+
+def target_spec(kind: str, speed_m_s: float, plane_z_m: float = 0.0) -> TargetSpec:
+    """The target motion of the policy's scenes: the full workspace, or a plane at ``plane_z_m``."""
+    spec = TargetSpec(kind=kind, speed_m_s=speed_m_s)
+    if plane_z_m > 0:
+        low, high = plane_workspace(spec.workspace_low_m, spec.workspace_high_m, plane_z_m)
+        spec = TargetSpec(kind=kind, speed_m_s=speed_m_s, workspace_low_m=low, workspace_high_m=high)
+    return spec
 
 
 def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_index: int) -> tuple[str, str]:
@@ -102,7 +114,7 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
     key = (n_objects, kind)
     if key not in world_cache:
         scene = SceneConfig(n_objects=n_objects, image_size_px=cfg.image_size_px, camera_names=cfg.cameras)
-        world_cache[key] = SimWorld(scene, TargetSpec(kind=kind, speed_m_s=cfg.speed_m_s), noise_m=0.002, dropout=0.1)
+        world_cache[key] = SimWorld(scene, target_spec(kind, cfg.speed_m_s, cfg.plane_z_m), noise_m=0.002, dropout=0.1)
     world = world_cache[key]
     world.reset(seed)
     # random start: perturb the home pose (the world's own reset puts the arm at home)
@@ -236,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--image-size-px", type=int, default=96, help="camera resolution")
     p.add_argument("--cameras", nargs="+", default=["front"], help="camera names")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    p.add_argument("--plane-z-m", type=float, default=0.0,
+                   help="> 0: objects at this height (+ up to 2 cm), moving horizontally; 0: the 3-D workspace")
     p.add_argument("--duration-s", type=float, default=1.0,
                    help="episode length; samples every 0.5 s before it (many short episodes = many scenes)")
     p.add_argument("--workers", type=int, default=1, help="parallel processes")
@@ -243,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = CollectConfig(episodes=args.episodes, objects=args.objects, motion=args.motion, speed_m_s=args.speed,
                             image_size_px=args.image_size_px, cameras=tuple(args.cameras), seed=args.seed,
-                            duration_s=args.duration_s)
+                            duration_s=args.duration_s, plane_z_m=args.plane_z_m)
     except ValueError as exc:
         p.error(str(exc))
     n = collect(cfg, Path(args.out), workers=args.workers)

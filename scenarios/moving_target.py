@@ -28,7 +28,7 @@ from policy.action_tokenizer import ActionTokenizer
 from policy.vocab import VocabLayout
 from scenarios.expert import ExpertConfig, ScriptedExpert
 from scenarios.targets import KINDS as TARGET_KINDS
-from scenarios.targets import TargetSpec
+from scenarios.collect import target_spec
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "expert"
@@ -58,6 +58,12 @@ def _number(kind, name: str, low: float | None = None, low_inclusive: bool = Tru
         return value
 
     return parse
+
+
+def _plane(text: str):
+    if text.strip().lower() == "auto":
+        return "auto"
+    return _number(float, "--plane-z-m", 0, True, 0.6)(text)
 
 
 def _latency(text: str):
@@ -116,6 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--chunk-dt-s", type=_number(float, "--chunk-dt-s", 0, False), default=0.1, help="waypoint spacing (s)")
     w = p.add_argument_group("world")
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
+    w.add_argument("--plane-z-m", type=_plane, default="auto",
+                   help="objects at this height (+ up to 2 cm) moving horizontally, as in the policy's training scenes; "
+                        "0 = the full 3-D workspace; auto = 0.1 with --source policy, 0 with --source expert")
     w.add_argument("--objects", type=int, choices=(1, 2), default=2,
                    help="objects in the scene (two differently coloured balls: the instruction names one)")
     w.add_argument("--instruction", metavar="TEXT", default=None,
@@ -173,7 +182,8 @@ def run(args: argparse.Namespace) -> dict:
     from scenarios.sim_world import SimWorld
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
-    target = TargetSpec(kind=args.target, speed_m_s=args.speed)
+    plane_z_m = (0.1 if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
+    target = target_spec(args.target, args.speed, plane_z_m)
     source = make_source(args)
     world = SimWorld(SceneConfig(n_objects=args.objects), target, noise_m=args.noise_m, dropout=args.dropout,
                      instruction=args.instruction)

@@ -120,6 +120,16 @@ class TargetMotion(Protocol):
 # helpers
 
 
+#: a workspace thinner than this in z is treated as a plane: linear motions stay horizontal.
+PLANAR_EXTENT_M = 0.05
+
+
+def plane_workspace(spec_low_m: tuple[float, float, float], spec_high_m: tuple[float, float, float], z_m: float,
+                    thickness_m: float = 0.02) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Workspace corners with the objects at height ``z_m`` (within ``thickness_m``), x/y unchanged."""
+    return (spec_low_m[0], spec_low_m[1], z_m), (spec_high_m[0], spec_high_m[1], z_m + thickness_m)
+
+
 def _random_unit(rng: np.random.Generator) -> np.ndarray:
     v = rng.normal(size=3)
     return v / np.linalg.norm(v)
@@ -290,8 +300,12 @@ def make_motion(spec: TargetSpec, seed: int) -> TargetMotion:
     if spec.kind == "static":
         return StaticMotion(point_m=_start_point(spec, rng, low, high))
     if spec.kind == "linear":
-        return LinearMotion(start_m=_start_point(spec, rng, low, high), velocity_m_s=spec.speed_m_s * _random_unit(rng),
-                            low_m=low, high_m=high)
+        start = _start_point(spec, rng, low, high)
+        direction = _random_unit(rng)
+        if high[2] - low[2] < PLANAR_EXTENT_M:  # a flat workspace (objects at one height): move horizontally
+            direction[2] = 0.0
+            direction /= max(np.linalg.norm(direction), 1e-12)
+        return LinearMotion(start_m=start, velocity_m_s=spec.speed_m_s * direction, low_m=low, high_m=high)
     if spec.kind == "circle":
         r = spec.circle_radius_m
         clow, chigh = low + np.array([r, r, 0.0]), high - np.array([r, r, 0.0])
