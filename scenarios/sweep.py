@@ -95,7 +95,9 @@ def default_grid(quick: bool = False, seeds: int = 3) -> list[Study]:
 
 
 def cell_key(cell: dict, duration_s: float) -> str:
-    text = json.dumps({**{k: cell[k] for k in AXES if k != "study"}, "duration_s": duration_s}, sort_keys=True)
+    text = json.dumps({**{k: cell[k] for k in AXES if k != "study"}, "duration_s": duration_s,
+                       **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
+                          if cell.get("source", "expert") != "expert" else {})}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -113,9 +115,26 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     from mmact_ctrl.metrics import episode_metrics
     from scenarios.factory import make_expert, make_world
 
-    wkey = ("world", cell["target"], cell["speed_m_s"])
+    source_name = cell.get("source", "expert")
+    wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
     if wkey not in _CACHE:
-        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+        if source_name == "policy":  # the policy's scenes: two balls at one height (see scenarios.collect)
+            from scenarios.collect import target_spec
+            from scenarios.panda_scene import SceneConfig
+            from scenarios.sim_world import SimWorld
+
+            _CACHE[wkey] = SimWorld(SceneConfig(n_objects=2), target_spec(cell["target"], cell["speed_m_s"], 0.1),
+                                    noise_m=0.002, dropout=0.1)
+        else:
+            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+    if source_name == "policy":
+        if "policy" not in _CACHE:
+            from mmact_ctrl.policy_source import PolicyChunkSource
+
+            _CACHE["policy"] = PolicyChunkSource(cell.get("checkpoint") or None)
+        source = _CACHE["policy"]
+    else:
+        source = make_expert(bins=cell["bins"])
     if "model" not in _CACHE:
         from controllers.robot_model import PandaModel
 
@@ -123,7 +142,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
                       duration_s=duration_s, retarget=RetargetConfig("displacement"))
     controller = HybridController(cfg, model=_CACHE["model"])
-    log = run_episode(_CACHE[wkey], make_expert(bins=cell["bins"]), controller, seed=cell["seed"])
+    log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"])
     m = episode_metrics(log)
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)
@@ -195,6 +214,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
     p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
                                                   "speed_m_s, bins, seeds}) instead of the default grid")
+    p.add_argument("--source", choices=("expert", "policy"), default="expert",
+                   help="chunk source of every cell: the scripted expert, or the learned policy (two balls at one "
+                        "height, as in its training scenes; bins are then the policy's own)")
+    p.add_argument("--checkpoint", default=None, help="policy checkpoint (default: the shipped one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     if args.seeds < 1 or args.workers < 1:
@@ -225,6 +248,13 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = [c for s in studies for c in s.cells()]
+    if args.source == "policy":
+        from policy.inference import DEFAULT_CHECKPOINT
+
+        ckpt = args.checkpoint or str(DEFAULT_CHECKPOINT)
+        if not Path(ckpt).is_file():
+            p.error(f"policy checkpoint {ckpt!r} does not exist")
+        cells = [{**c, "source": "policy", "checkpoint": ckpt} for c in cells if c["study"] != "bins"]
     todo, rows = [], []
     for c in cells:
         path = out / "cells" / f"{cell_key(c, duration_s)}.json"
