@@ -112,6 +112,8 @@ class TaskSpaceQP:
         self.n = 7
         n = self.n
         self._w6 = np.array([config.w_pos] * 3 + [config.w_ori] * 3)
+        self._kp6 = np.array([config.kp_pos] * 3 + [config.kp_ori] * 3)
+        self._kd6 = np.array([config.kd_pos] * 3 + [config.kd_ori] * 3)
         self._p_diag = np.eye(n) * (config.w_post + config.w_reg)
         self._lower = np.empty(2 * n)
         self._upper = np.empty(2 * n)
@@ -153,11 +155,10 @@ class TaskSpaceQP:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The QP of this tick in dense form: ``min 0.5 x'Px + g'x  s.t.  lower <= A x <= upper``."""
         c = self.config
-        e_pos = ref.pos_m - terms.pos_m
-        e_ori = orientation_error(ref.rot, terms.rot)
-        a_des = np.empty(6)
-        a_des[:3] = ref.acc_m_s2 + c.kp_pos * e_pos + c.kd_pos * (ref.vel_m_s - terms.vel[:3])
-        a_des[3:] = ref.ang_acc_rad_s2 + c.kp_ori * e_ori + c.kd_ori * (ref.ang_vel_rad_s - terms.vel[3:])
+        e6 = np.concatenate((ref.pos_m - terms.pos_m, orientation_error(ref.rot, terms.rot)))
+        v6 = np.concatenate((ref.vel_m_s, ref.ang_vel_rad_s))
+        a6 = np.concatenate((ref.acc_m_s2, ref.ang_acc_rad_s2))
+        a_des = a6 + self._kp6 * e6 + self._kd6 * (v6 - terms.vel)
         ddq_post = c.kp_post * (ref.q_post_rad - q_rad) - c.kd_post * dq_rad_s
         J = terms.J
         WJ = J * self._w6[:, None]

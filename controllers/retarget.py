@@ -7,7 +7,8 @@ past the chunk's last waypoint, where the last waypoint is held):
   observation time: ``offset(t) = p_hat(t) - p_hat(t0)``.
 - ``snap``: pull the chunk onto the filtered target: the displacement above plus the chunk's
   aim error at observation time, blended from 0 at the chunk's activation to 1 at its last
-  waypoint: ``offset(t) = p_hat(t) - p_hat(t0) + alpha(t) * (p_hat(t0) - aim)``, ``aim`` being
+  waypoint that will run (the caller passes ``t_last_s``: the chunk's last waypoint, or the time
+  the next chunk is due if that is earlier): ``offset(t) = p_hat(t) - p_hat(t0) + alpha(t) * (p_hat(t0) - aim)``, ``aim`` being
   the chunk's last waypoint. At and after the last waypoint the reference is exactly the
   filtered target, so this also removes the chunk source's aim error and the dequantization
   error. (A pure pull ``alpha(t) * (p_hat(t) - aim)`` lags a moving target: with 1.6 s chunks
@@ -34,7 +35,7 @@ class RetargetConfig:
     trust_radius_m: gate on the distance between the chunk's aim and the target at observation time, m.
     """
 
-    rule: str = "displacement"
+    rule: str = "snap"
     trust_radius_m: float = 0.3
 
     def __post_init__(self) -> None:

@@ -86,24 +86,21 @@ class PandaModel:
 
     def terms(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> RobotTerms:
         """All terms at ``(q, dq)``: one ``computeAllTerms`` pass (~7 us)."""
-        m, d = self.model, self.data
+        m, d, fid = self.model, self.data, self.frame_id
         pin.computeAllTerms(m, d, q_rad, dq_rad_s)
-        pin.updateFramePlacement(m, d, self.frame_id)
+        oMf = pin.updateFramePlacement(m, d, fid)
         M = d.M.copy()
         if self._symmetrize:
             M[self._lower] = M.T[self._lower]
-        J = pin.getFrameJacobian(m, d, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
-        dJv = pin.getFrameClassicalAcceleration(m, d, self.frame_id, pin.LOCAL_WORLD_ALIGNED).vector
-        vel = pin.getFrameVelocity(m, d, self.frame_id, pin.LOCAL_WORLD_ALIGNED).vector
-        oMf = d.oMf[self.frame_id]
+        frame = pin.LOCAL_WORLD_ALIGNED
         return RobotTerms(
             M=M,
             h=d.nle + self._damping * dq_rad_s,
-            J=J,
-            dJv=dJv,
-            pos_m=oMf.translation.copy(),
-            rot=oMf.rotation.copy(),
-            vel=vel,
+            J=pin.getFrameJacobian(m, d, fid, frame),
+            dJv=pin.getFrameClassicalAcceleration(m, d, fid, frame).vector,
+            pos_m=oMf.translation,
+            rot=oMf.rotation,
+            vel=pin.getFrameVelocity(m, d, fid, frame).vector,
         )
 
     def fk(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,9 @@ class HybridController:
         self.config = config
         self.model = model if model is not None else PandaModel()
         self.qp = TaskSpaceQP(replace(config.qp, dt_s=config.dt_s))
-        self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=config.dt_s))
+        # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
+        smoother_dt_s = 1.0 / config.mpc.rate_hz if (config.mode == "hybrid" and config.use_mpc) else config.dt_s
+        self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
         self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
         self.hybrid = config.mode == "hybrid"
         self.use_mpc = self.hybrid and config.use_mpc
@@ -52,6 +54,7 @@ class HybridController:
         self.ensemble: list[ChunkReference] = []  # temporal_ensemble: every chunk still covering the future
         self._ensemble_mode = config.mode == "temporal_ensemble"
         self._trusted = False
+        self._blend_end_s = 0.0
         self._hold_pos = np.zeros(3)
         self._hold_rotvec = np.zeros(3)
         self.terms: RobotTerms | None = None
@@ -94,6 +97,8 @@ class HybridController:
         """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency)."""
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
+        # snap's blend ends at the last waypoint that will actually run: the next chunk is due one replan period on
+        self._blend_end_s = min(self.active.t_last_s, t_s + 1.0 / self.config.replan_hz)
         if self._ensemble_mode:
             self.ensemble = [c for c in self.ensemble if c.t_last_s > t_s] + [self.active]
 
@@ -126,7 +131,7 @@ class HybridController:
                 self.filter.predict_pos(t_s),
                 self.filter.vel_m_s,
                 self.active.t_active_s,
-                self.active.t_last_s,
+                self._blend_end_s,
             )
             pos, vel = pos + offset, vel + offset_vel
         return pos, vel, action[3:6], rate[3:6], float(action[6])
@@ -140,23 +145,38 @@ class HybridController:
             preview = preview + self.smoother.preview_pos_offset(taus)
         return self.mpc.solve(t_s, q_rad, dq_rad_s, terms.pos_m, terms.J, preview, orientation_error(rot_des, terms.rot))
 
-    def tick(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
-        """One control period: torques for the measured joint state."""
-        terms = self.model.terms(q_rad, dq_rad_s)
-        self.terms = terms
+    def _smoothed_reference(self, t_s: float):
+        """(pos, vel, acc, rot, ang_vel, ang_acc, gripper): the reference after retargeting and Ruckig."""
         pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
         if self.hybrid and self.config.use_ruckig:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
         else:
             acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)
-        rot = rot_from_rotvec(rotvec, self.rot_nominal)
-        q_post = self.q_post
+        return pos, vel, acc, rot_from_rotvec(rotvec, self.rot_nominal), ang_vel, ang_acc, gripper
+
+    def tick(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
+        """One control period: torques for the measured joint state.
+
+        Without MPC the reference is retargeted and Ruckig-smoothed every tick. With MPC the QP tracks
+        the MPC plan, so retargeting and Ruckig run at the MPC's rate (their output is only read there;
+        Ruckig then steps with the MPC period), and every tick only samples the plan.
+        """
+        terms = self.model.terms(q_rad, dq_rad_s)
+        self.terms = terms
         if self.use_mpc:
             if t_s >= self._next_mpc_s - 1e-9:
+                ref_pos, _, _, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
+                self._slow_ref = (ref_pos, rot, ang_vel, ang_acc, gripper)
                 self._plan = self._solve_mpc(t_s, q_rad, dq_rad_s, terms, rot)
                 self._next_mpc_s = t_s + self._mpc_period_s
-            pos, vel, acc = self._plan.sample_task(t_s)
-            q_post = self._plan.sample(t_s)[0]
+            ref_pos, rot, ang_vel, ang_acc, gripper = self._slow_ref
+            plan = self._plan
+            q_post, dq_plan, ddq_plan = plan.sample(t_s)  # == plan.sample_task, with one sample instead of two
+            jl = plan.ee_jacobian_lin
+            pos, vel, acc = plan.ee_pos_m[0] + jl @ (q_post - plan.q_rad[0]), jl @ dq_plan, jl @ ddq_plan
+        else:
+            pos, vel, acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
+            ref_pos, q_post = pos, self.q_post
         ref = TaskReference(
             pos_m=pos,
             vel_m_s=vel,
@@ -167,4 +187,4 @@ class HybridController:
             q_post_rad=q_post,
         )
         tau = self.qp.solve(terms, q_rad, dq_rad_s, ref)
-        return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=pos, ee_pos_m=terms.pos_m)
+        return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=ref_pos, ee_pos_m=terms.pos_m)

@@ -31,7 +31,7 @@ from scenarios.targets import KINDS as TARGET_KINDS
 from scenarios.collect import target_spec
 
 PROG = "python -m scenarios.moving_target"
-DEFAULT_SOURCE = "expert"
+DEFAULT_SOURCE = "policy"
 
 
 class _OneLineErrorParser(argparse.ArgumentParser):
@@ -106,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-ruckig", action="store_true", help="hybrid: track the retargeted reference without Ruckig smoothing")
     g.add_argument("--no-mpc", action="store_true",
                    help="hybrid: no MPC between Ruckig and the QP (the QP tracks the smoothed reference directly)")
-    g.add_argument("--retarget", choices=RULES, default="displacement",
+    g.add_argument("--retarget", choices=RULES, default="snap",
                    help="hybrid: displacement shifts the chunk by how far the filtered target moved since the observation; "
                         "snap pulls the chunk's aim onto the filtered target (also removes aim and quantization error); none")
     g.add_argument("--trust-radius-m", type=_number(float, "--trust-radius-m", 0, False), default=0.3,

@@ -108,7 +108,6 @@ _CACHE: dict = {}
 
 def run_cell(cell: dict, duration_s: float) -> dict:
     """One episode for one grid cell; returns the row (axes + episode metrics)."""
-    from controllers.retarget import RetargetConfig
     from mmact_ctrl.config import StackConfig
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
@@ -140,7 +139,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
 
         _CACHE["model"] = PandaModel()
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
-                      duration_s=duration_s, retarget=RetargetConfig("displacement"))
+                      duration_s=duration_s)
     controller = HybridController(cfg, model=_CACHE["model"])
     log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"])
     m = episode_metrics(log)
