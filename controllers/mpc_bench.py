@@ -16,34 +16,27 @@ from typing import Callable
 import numpy as np
 
 from controllers.mpc import SOLVERS, MPCConfig, MPCPlan, TaskSpaceMPC
-from controllers.robot_description import ARM_JOINTS, HOME_Q_RAD, TCP_FRAME, panda_urdf_path
+from controllers.robot_description import HOME_Q_RAD
 
 
 class PandaKinematics:
-    """Pinocchio model of the 7 arm joints (fingers locked): TCP position and 6x7 Jacobian."""
+    """TCP position, rotation and 6x7 Jacobian of the one Panda model (``controllers.robot_model.PandaModel``)."""
 
     def __init__(self) -> None:
-        import pinocchio as pin
+        from controllers.robot_model import PandaModel
 
-        self._pin = pin
-        full = pin.buildModelFromUrdf(str(panda_urdf_path()))
-        lock = [full.getJointId(name) for name in full.names if name not in ARM_JOINTS and name != "universe"]
-        self.model = pin.buildReducedModel(full, lock, pin.neutral(full))
-        self.data = self.model.createData()
-        self.frame_id = self.model.getFrameId(TCP_FRAME)
+        self._robot = PandaModel()
 
     def tcp(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(position m (3,), rotation (3,3), Jacobian 6x7 LOCAL_WORLD_ALIGNED) at ``q_rad``."""
-        pin = self._pin
-        pin.computeJointJacobians(self.model, self.data, q_rad)
-        pin.updateFramePlacements(self.model, self.data)
-        oMf = self.data.oMf[self.frame_id]
-        jac = pin.getFrameJacobian(self.model, self.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
-        return oMf.translation.copy(), oMf.rotation.copy(), np.array(jac)
+        terms = self._robot.terms(np.asarray(q_rad, dtype=float), np.zeros(7))
+        return terms.pos_m.copy(), terms.rot.copy(), np.array(terms.J)
 
     def rotvec(self, rot: np.ndarray) -> np.ndarray:
         """Rotation vector (rad) of a rotation matrix."""
-        return np.asarray(self._pin.log3(rot))
+        import pinocchio as pin
+
+        return np.asarray(pin.log3(rot))
 
 
 @dataclass(frozen=True)
