@@ -39,7 +39,7 @@ from policy.action_tokenizer import ActionBounds, ActionTokenizer
 from policy.bundle import PolicyBundle, make_state_tokenizer
 from policy.checkpoint import CheckpointError
 from policy.config import ImageTokenizerConfig, LossWeights, ModelConfig, TrainConfig
-from policy.dataset import SHARD_FIELDS, read_meta, read_shard, shard_paths, split_indices
+from policy.dataset import read_meta, read_shard, shard_paths, split_indices
 from policy.decoding import decode_parallel, target_tokens
 from policy.image_tokenizer import ImageTokenizer, evaluate_psnr, train_image_tokenizer
 from policy.text_tokenizer import TextTokenizer
