@@ -15,6 +15,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, ChunkSource, Observation
 from mmact_ctrl.controller import HybridController
+from mmact_ctrl.reference import ChunkReference
 from mmact_ctrl.world import World
 
 
@@ -77,8 +78,6 @@ def known_prefix(controller: HybridController, pending, t_s: float, latency_s: f
         return np.zeros((0, 7))
     dt = getattr(source, "chunk_dt_s", scheduled.dt_s)
     n_known = int(np.ceil(latency_s / dt - 1e-9))
-    from mmact_ctrl.reference import ChunkReference
-
     ref = ChunkReference(chunk=scheduled, t_active_s=t_s, target_at_obs_m=None)
     return np.array([ref.sample(t_s + (i + 1) * dt)[0] for i in range(n_known)]).reshape(n_known, 7)
 
@@ -127,6 +126,7 @@ def run_episode(
     next_plan_s = 0.0
     mode = cfg.mode
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
+    render_video = getattr(world, "render_video", None)  # optional part of a world: a larger frame for videos
     perception_every = cfg.perception_every
     wall0 = time.perf_counter()
     for k in range(n):
@@ -173,7 +173,6 @@ def run_episode(
         log.dq_rad_s[k] = state.dq_rad_s
         log.tau_cmd_nm[k] = out.tau_nm
         if frame_every and k % frame_every == 0:
-            render_video = getattr(world, "render_video", None)  # optional: a larger frame for videos
             log.frames.append(render_video() if render_video else world.render()[0])
         world.step(out.tau_nm, out.gripper_m)
         if progress is not None and k % 500 == 0:

@@ -31,8 +31,8 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import observe
 from policy.action_tokenizer import ActionBounds
 from scenarios.expert import ExpertConfig, ScriptedExpert, expert_actions
-from scenarios.panda_scene import TARGET_COLORS, SceneConfig
-from scenarios.targets import TargetSpec, plane_workspace
+from scenarios.panda_scene import TARGET_COLORS
+from scenarios.factory import make_world
 
 
 @dataclass(frozen=True)
@@ -79,15 +79,6 @@ class CollectConfig:
             raise ValueError(f"future_dt_s must be > 0, got {self.future_dt_s}")
 
 
-def target_spec(kind: str, speed_m_s: float, plane_z_m: float = 0.0) -> TargetSpec:
-    """The target motion of the policy's scenes: the full workspace, or a plane at ``plane_z_m``."""
-    spec = TargetSpec(kind=kind, speed_m_s=speed_m_s)
-    if plane_z_m > 0:
-        low, high = plane_workspace(spec.workspace_low_m, spec.workspace_high_m, plane_z_m)
-        spec = TargetSpec(kind=kind, speed_m_s=speed_m_s, workspace_low_m=low, workspace_high_m=high)
-    return spec
-
-
 def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_index: int) -> tuple[str, str]:
     """A question about the scene whose answer a single frame shows."""
     colors = TARGET_COLORS[: len(objects_pos_m)]
@@ -105,16 +96,14 @@ def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_
 
 def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[str, list]:
     """Run one episode and return its samples as lists."""
-    from scenarios.sim_world import SimWorld
-
     seed = cfg.seed + index
     rng = np.random.default_rng([seed, 7])
     n_objects = cfg.objects or (1 if rng.random() < 1 / 3 else 2)
     kind = cfg.motion if cfg.motion != "mixed" else ("linear" if rng.random() < 1 / 3 else "static")
     key = (n_objects, kind)
     if key not in world_cache:
-        scene = SceneConfig(n_objects=n_objects, image_size_px=cfg.image_size_px, camera_names=cfg.cameras)
-        world_cache[key] = SimWorld(scene, target_spec(kind, cfg.speed_m_s, cfg.plane_z_m), noise_m=0.002, dropout=0.1)
+        world_cache[key] = make_world(kind, cfg.speed_m_s, n_objects=n_objects, plane_z_m=cfg.plane_z_m,
+                                      image_size_px=cfg.image_size_px, cameras=cfg.cameras)
     world = world_cache[key]
     world.reset(seed)
     # random start: perturb the home pose (the world's own reset puts the arm at home)

@@ -1,5 +1,8 @@
-"""Named constructors of worlds and chunk sources, for tools that must not import ``scenarios``
-directly (``mmact_ctrl.bench`` loads them by the name ``scenarios.factory:make_world``)."""
+"""The one place that builds the MuJoCo world and the scripted expert from plain settings.
+
+The CLI, the sweep, the data collector and tools that must not import ``scenarios`` directly
+(``mmact_ctrl.bench`` loads them by the name ``scenarios.factory:make_world``) all use these.
+"""
 
 from __future__ import annotations
 
@@ -8,14 +11,16 @@ from policy.vocab import VocabLayout
 from scenarios.expert import ExpertConfig, ScriptedExpert
 from scenarios.panda_scene import SceneConfig
 from scenarios.sim_world import SimWorld
-from scenarios.targets import TargetSpec
+from scenarios.targets import target_spec
 
 
 def make_world(target: str = "linear", speed_m_s: float = 0.2, noise_m: float = 0.002, dropout: float = 0.1,
-               n_objects: int = 1) -> SimWorld:
-    """The default MuJoCo Panda scene with one moving target."""
-    return SimWorld(SceneConfig(n_objects=n_objects), TargetSpec(kind=target, speed_m_s=speed_m_s), noise_m=noise_m,
-                    dropout=dropout)
+               n_objects: int = 1, plane_z_m: float = 0.0, instruction: str | None = None,
+               image_size_px: int = 96, cameras: tuple[str, ...] = ("front",)) -> SimWorld:
+    """The Panda scene with ``n_objects`` balls moving as ``target`` (over a plane at ``plane_z_m`` if > 0)."""
+    scene = SceneConfig(n_objects=n_objects, image_size_px=image_size_px, camera_names=tuple(cameras))
+    return SimWorld(scene, target_spec(target, speed_m_s, plane_z_m), noise_m=noise_m, dropout=dropout,
+                    instruction=instruction)
 
 
 def make_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1) -> ScriptedExpert:

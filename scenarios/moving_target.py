@@ -24,11 +24,8 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
-from policy.action_tokenizer import ActionTokenizer
-from policy.vocab import VocabLayout
-from scenarios.expert import ExpertConfig, ScriptedExpert
 from scenarios.targets import KINDS as TARGET_KINDS
-from scenarios.collect import target_spec
+from scenarios.factory import make_expert, make_world
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
@@ -167,26 +164,18 @@ def make_source(args: argparse.Namespace):
         from mmact_ctrl.policy_source import PolicyChunkSource
 
         return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps)
-    tokenizer = None
-    if args.bins:
-        layout = VocabLayout(action_bins=args.bins)
-        tokenizer = ActionTokenizer(bins=args.bins, token_offset=layout.action_offset)
-    return ScriptedExpert(ExpertConfig(horizon=args.horizon, dt_s=args.chunk_dt_s), tokenizer)
+    return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s)
 
 
 def run(args: argparse.Namespace) -> dict:
     """Run every requested mode on the same seeds; returns the JSON payload."""
     from tqdm import tqdm
 
-    from scenarios.panda_scene import SceneConfig
-    from scenarios.sim_world import SimWorld
-
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
     plane_z_m = (0.1 if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
-    target = target_spec(args.target, args.speed, plane_z_m)
     source = make_source(args)
-    world = SimWorld(SceneConfig(n_objects=args.objects), target, noise_m=args.noise_m, dropout=args.dropout,
-                     instruction=args.instruction)
+    world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
+                       plane_z_m=plane_z_m, instruction=args.instruction)
     runs: dict[str, dict] = {}
     first_logs = {}
     total = len(configs) * args.episodes
@@ -218,7 +207,7 @@ def run(args: argparse.Namespace) -> dict:
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
-                   "target_spec": dataclasses.asdict(target)},
+                   "target_spec": dataclasses.asdict(world.target)},
         "summary": runs[last]["summary"],
         "episodes": runs[last]["episodes"],
         "runs": runs,

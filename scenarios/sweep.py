@@ -116,16 +116,9 @@ def run_cell(cell: dict, duration_s: float) -> dict:
 
     source_name = cell.get("source", "expert")
     wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
-    if wkey not in _CACHE:
-        if source_name == "policy":  # the policy's scenes: two balls at one height (see scenarios.collect)
-            from scenarios.collect import target_spec
-            from scenarios.panda_scene import SceneConfig
-            from scenarios.sim_world import SimWorld
-
-            _CACHE[wkey] = SimWorld(SceneConfig(n_objects=2), target_spec(cell["target"], cell["speed_m_s"], 0.1),
-                                    noise_m=0.002, dropout=0.1)
-        else:
-            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+    if wkey not in _CACHE:  # the policy's scenes: two balls at one height (as in scenarios.collect)
+        policy_scene = dict(n_objects=2, plane_z_m=0.1) if source_name == "policy" else {}
+        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **policy_scene)
     if source_name == "policy":
         if "policy" not in _CACHE:
             from mmact_ctrl.policy_source import PolicyChunkSource

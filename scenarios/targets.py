@@ -130,6 +130,15 @@ def plane_workspace(spec_low_m: tuple[float, float, float], spec_high_m: tuple[f
     return (spec_low_m[0], spec_low_m[1], z_m), (spec_high_m[0], spec_high_m[1], z_m + thickness_m)
 
 
+def target_spec(kind: str, speed_m_s: float, plane_z_m: float = 0.0) -> "TargetSpec":
+    """A target motion over the full workspace, or (``plane_z_m > 0``) over a plane at that height."""
+    spec = TargetSpec(kind=kind, speed_m_s=speed_m_s)
+    if plane_z_m > 0:
+        low, high = plane_workspace(spec.workspace_low_m, spec.workspace_high_m, plane_z_m)
+        spec = TargetSpec(kind=kind, speed_m_s=speed_m_s, workspace_low_m=low, workspace_high_m=high)
+    return spec
+
+
 def _random_unit(rng: np.random.Generator) -> np.ndarray:
     v = rng.normal(size=3)
     return v / np.linalg.norm(v)

@@ -5,14 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """One intra-op thread: on a shared 2-core machine oversubscription makes small ops ~30x slower."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 import torch
 
 from policy.bundle import PolicyBundle, untrained_bundle

@@ -5,14 +5,6 @@ import pytest
 import torch
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """One intra-op thread: on a shared 2-core machine oversubscription makes small ops ~30x slower."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
 from policy.action_tokenizer import ActionTokenizer
 from policy.bundle import make_state_tokenizer
 from policy.config import PANDA_Q_HIGH_RAD, PANDA_Q_LOW_RAD, ImageTokenizerConfig
@@ -77,7 +69,6 @@ def test_image_codes_in_range_and_shape():
 
 def test_image_tokenizer_trains_a_little():
     cfg = ImageTokenizerConfig(image_size_px=32, strides=(2, 2), channels=(8, 16), codebook_size=32, code_dim=8)
-    import torch
 
     torch.manual_seed(0)
     tok = ImageTokenizer(cfg)

@@ -4,20 +4,12 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from policy.dataset import DatasetError, PolicyDataset, read_shard, shard_paths, split_indices
 from policy.inference import MMActPolicy
 from policy.synthetic import make_samples, world_to_pixel, write_synthetic_dataset
 from policy.train import main as train_main
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="module")
