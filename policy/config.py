@@ -161,3 +161,4 @@ class TrainConfig:
     split_seed: int = 1234  # fixed across stages, so every stage holds out the same samples
     eval_samples: int = 256
     seed: int = 0
+    aux_batch_size: int = 0  # batch of the t2i and mmu tasks; 0 = batch_size (a cheaper fine-tune keeps them small)

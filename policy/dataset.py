@@ -50,6 +50,32 @@ def shard_paths(path: str | Path) -> list[Path]:
     return shards
 
 
+def read_metas(paths: str | Path | list[str | Path]) -> dict[str, Any]:
+    """The common ``meta.json`` of one or several dataset directories (trained on together).
+
+    The directories must agree on every field that fixes the token layout (image size, cameras, chunk
+    horizon and spacing, action bounds and bins, future frame offset); the first one's meta is returned,
+    with ``n_samples`` summed."""
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    if not paths:
+        raise DatasetError("no dataset directory given")
+    metas = [read_meta(p) for p in paths]
+    for p, m in zip(paths[1:], metas[1:]):
+        for k in META_KEYS:
+            if m[k] != metas[0][k]:
+                raise DatasetError(f"{p}: meta.json {k}={m[k]!r} differs from {paths[0]}'s {metas[0][k]!r}")
+    meta = dict(metas[0])
+    if all("n_samples" in m for m in metas):
+        meta["n_samples"] = sum(int(m["n_samples"]) for m in metas)
+    return meta
+
+
+def dataset_shards(paths: str | Path | list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
+    """Every shard of one or several dataset directories, each with its own directory's meta."""
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    return [(s, read_meta(p)) for p in paths for s in shard_paths(p)]
+
+
 def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
     """One shard as a dict of arrays, shapes and dtypes checked against ``meta``."""
     try:

@@ -39,7 +39,7 @@ from policy.action_tokenizer import ActionBounds, ActionTokenizer
 from policy.bundle import PolicyBundle, make_state_tokenizer
 from policy.checkpoint import CheckpointError
 from policy.config import ImageTokenizerConfig, LossWeights, ModelConfig, TrainConfig
-from policy.dataset import read_meta, read_shard, shard_paths, split_indices
+from policy.dataset import DatasetError, dataset_shards, read_metas, read_shard, split_indices
 from policy.decoding import decode_parallel, target_tokens
 from policy.image_tokenizer import ImageTokenizer, evaluate_psnr, train_image_tokenizer
 from policy.text_tokenizer import TextTokenizer
@@ -49,15 +49,16 @@ TASK_WEIGHT = {"mm2a": "action", "t2i": "image", "mmu": "text"}
 
 
 # ---------------------------------------------------------------- data
-def load_tokenized(bundle: PolicyBundle, data_path: str, progress: bool = True) -> dict[str, np.ndarray]:
-    """Read every shard and keep only tokens: codes of images / future images, text ids, state and action tokens."""
+def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: bool = True) -> dict[str, np.ndarray]:
+    """Read every shard (of one or several dataset directories) and keep only tokens: codes of images /
+    future images, text ids, state and action tokens."""
     from tqdm import tqdm
 
-    meta = read_meta(data_path)
+    read_metas(data_path)  # the directories must agree on the token layout
     cfg = bundle.model_cfg
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("img", "fut", "instr", "quest", "answer", "answer_str", "state",
                                                            "action", "actions_f", "target_pos_m")}
-    for shard in tqdm(shard_paths(data_path), desc="tokenizing shards", disable=not progress):
+    for shard, meta in tqdm(dataset_shards(data_path), desc="tokenizing shards", disable=not progress):
         d = read_shard(shard, meta)
         parts["img"].append(bundle.image_codes(d["images"]).astype(np.int16))
         parts["fut"].append(bundle.image_codes(d["future_images"]).astype(np.int16))
@@ -185,8 +186,8 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
     torch.manual_seed(args.seed)
     frames, corpus = [], []
     n_total = 0
-    for shard in shard_paths(args.data):
-        d = read_shard(shard, meta)
+    for shard, shard_meta in dataset_shards(args.data):
+        d = read_shard(shard, shard_meta)
         n_total += len(d["images"])
         corpus += list(d["instructions"]) + list(d["questions"]) + list(d["answers"])
         f = np.concatenate([d["images"], d["future_images"]]).reshape(-1, *d["images"].shape[2:])
@@ -260,7 +261,8 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
         tc = TrainConfig(stage=args.stage, steps=args.steps or 2000, batch_size=args.batch_size or 32, lr=args.lr or 3e-4,
                          weight_decay=0.01 if args.weight_decay is None else args.weight_decay,
                          warmup_steps=min(200, max(1, (args.steps or 2000) // 10)), weights=w, seed=args.seed,
-                         eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins)
+                         eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins,
+                         aux_batch_size=args.aux_batch_size or 0)
     check_data_matches(bundle, meta, args.init or resume_path)
     torch.manual_seed(tc.seed)
     rng = np.random.default_rng(tc.seed)
@@ -302,7 +304,8 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
         losses = {}
         total = torch.zeros((), device=device)
         for task in tasks:
-            idx = rng.choice(train_idx, size=tc.batch_size, replace=len(train_idx) < tc.batch_size)
+            bs = tc.batch_size if task == "mm2a" or not tc.aux_batch_size else tc.aux_batch_size
+            idx = rng.choice(train_idx, size=bs, replace=len(train_idx) < bs)
             with torch.autocast("cuda", dtype=torch.bfloat16, enabled=use_amp):
                 loss = task_loss(bundle, data, task, idx, rng, tc.full_mask_prob_action, device,
                                  tc.action_label_sigma_bins)
@@ -353,7 +356,7 @@ def write_model_card(path: Path, ckpt: Path, args, meta, info: dict[str, Any], h
         "`[special | task + segment | text | image codes | action bins]`, one bidirectional transformer, one tied head.", "",
         "## How it was made", "",
         f"- command: `{' '.join(shlex.quote(a) for a in ['python', '-m', 'policy.train', *sys.argv[1:]])}`",
-        f"- data: `{args.data}` ({info.get('n_samples')} samples; cameras {meta.get('camera_names')}, "
+        f"- data: `{' '.join(args.data)}` ({info.get('n_samples')} samples; cameras {meta.get('camera_names')}, "
         f"{meta.get('image_size_px')} px, generator {meta.get('generator', 'scenarios.collect')})",
         f"- steps: {args.steps}, seed {args.seed}, device `{args.device}`",
         f"- wall time: {info.get('train_wall_s', info.get('wall_s', 0.0)):.1f} s (training), "
@@ -383,7 +386,9 @@ def write_model_card(path: Path, ckpt: Path, args, meta, info: dict[str, Any], h
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(prog="python -m policy.train", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", required=True, help="dataset directory (meta.json + shard_XXXX.npz)")
+    ap.add_argument("--data", required=True, nargs="+",
+                    help="dataset directory (meta.json + shard_XXXX.npz); several directories are trained on together "
+                         "(they must agree on image size, cameras, chunk layout and action bins)")
     ap.add_argument("--stage", type=int, choices=(0, 1, 2), required=True)
     ap.add_argument("--out", required=True, help="output directory: stage{N}.pt, MODEL_CARD.md, resume_stage{N}.pt")
     ap.add_argument("--init", help="checkpoint to start from (stage 1: stage-0 tokenizers; stage 2: stage 1)")
@@ -392,6 +397,9 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--resume", action="store_true", help="continue from OUT/resume_stage{N}.pt")
     ap.add_argument("--batch-size", type=int, default=None, help="per task (default 32)")
+    ap.add_argument("--aux-batch-size", type=int, default=None,
+                    help="stages 1/2: batch of the t2i and mmu tasks (default: --batch-size); small values make a "
+                         "fine-tune that still rehearses them cheaper")
     ap.add_argument("--lr", type=float, default=None)
     ap.add_argument("--save-every", type=int, default=500)
     ap.add_argument("--eval-samples", type=int, default=256)
@@ -416,11 +424,16 @@ def main(argv: list[str] | None = None) -> Path:
                     help="torch CPU threads (on a shared, busy CPU 1 thread is often much faster than oversubscribing)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    if args.aux_batch_size is not None and args.aux_batch_size < 1:
+        ap.error(f"--aux-batch-size must be >= 1, got {args.aux_batch_size}")
     if args.threads:
         torch.set_num_threads(args.threads)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda but no CUDA device is available")
-    meta = read_meta(args.data)
+    try:
+        meta = read_metas(args.data)
+    except DatasetError as exc:
+        raise SystemExit(f"--data: {exc}") from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / f"stage{args.stage}.pt"
@@ -440,7 +453,7 @@ def main(argv: list[str] | None = None) -> Path:
         if prev.get("stage") is not None:
             history.append({"stage": prev.get("stage"), "command": prev.get("command"), "figures": prev.get("figures", {})})
         info["text_size"] = bundle.model_cfg.text_size
-    info.update({"stage": args.stage, "command": command, "history": history, "data": str(args.data), "seed": args.seed})
+    info.update({"stage": args.stage, "command": command, "history": history, "data": " ".join(args.data), "seed": args.seed})
     bundle.info = info
     bundle.save(ckpt, info)
     write_model_card(out / "MODEL_CARD.md", ckpt, args, meta, info, history)

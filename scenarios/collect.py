@@ -3,7 +3,7 @@
     python -m scenarios.collect --episodes 1000 --out data/demos
 
 Each episode: one or two coloured balls (static or moving), an instruction naming one of them,
-the arm driven toward it by the hybrid stack from a randomly perturbed start. Every
+the arm driven toward it by the QP tracking the expert's chunks from a randomly perturbed start. Every
 ``--sample-every-s`` a sample is recorded: the camera frame(s), the joint state, the expert's
 action chunk for that frame (float, not quantized), the frame ``--future-dt-s`` later (for
 ``<|t2i|>``), and a question/answer pair about the scene (for ``<|mmu|>``).
@@ -12,6 +12,12 @@ Output: a directory with ``meta.json`` and shards ``shard_XXXX.npz`` (arrays ``i
 uint8``, ``future_images``, ``q_rad (N,7)``, ``actions (N,16,7)``, ``instructions``, ``questions``,
 ``answers`` (unicode strings), ``target_index (N,)``, ``target_pos_m (N,3)``), which numpy or any
 npz reader opens.
+
+DAgger-style relabelling (``--driver-checkpoint PATH --driver-prob P``): each chunk that *drives* the arm comes
+from that trained policy with probability P (from the expert otherwise), while every recorded label is still
+the expert's chunk for the recorded frame. The data then covers the states the policy itself visits, e.g. the
+gripper hovering a few centimetres off the ball and hiding it from the camera, which pure expert runs seldom
+reach. ``--duration-s 3`` keeps the arm around the ball for most of the episode.
 """
 
 from __future__ import annotations
@@ -65,6 +71,8 @@ class CollectConfig:
     cameras: tuple[str, ...] = ("front",)
     seed: int = 0
     plane_z_m: float = 0.0
+    driver_checkpoint: str = ""
+    driver_prob: float = 0.0
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -77,6 +85,12 @@ class CollectConfig:
             raise ValueError(f"sample_every_s must be in (0, duration_s), got {self.sample_every_s}")
         if not self.future_dt_s > 0:
             raise ValueError(f"future_dt_s must be > 0, got {self.future_dt_s}")
+        if not 0.0 <= self.driver_prob <= 1.0:
+            raise ValueError(f"driver_prob must be in [0, 1], got {self.driver_prob}")
+        if self.driver_prob > 0 and not self.driver_checkpoint:
+            raise ValueError("driver_prob > 0 needs a driver_checkpoint (the policy whose chunks drive the arm)")
+        if self.driver_checkpoint and not Path(self.driver_checkpoint).is_file():
+            raise ValueError(f"driver_checkpoint {self.driver_checkpoint!r} does not exist")
 
 
 def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_index: int) -> tuple[str, str]:
@@ -119,6 +133,13 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
     controller.reset(world.state().q_rad)
     expert_cfg = ExpertConfig()
     source = ScriptedExpert(expert_cfg)
+    driver = None
+    if cfg.driver_prob > 0:
+        if "driver" not in world_cache:
+            from mmact_ctrl.policy_source import PolicyChunkSource
+
+            world_cache["driver"] = PolicyChunkSource(cfg.driver_checkpoint)
+        driver = world_cache["driver"]
     dt = world.dt_s
     n = int(round((cfg.duration_s + cfg.future_dt_s) / dt))
     every = int(round(cfg.sample_every_s / dt))
@@ -134,7 +155,8 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
             frames[k] = obs.image
             q, a = question_answer(rng, world.objects_pos_m(), world.target_index)
             pending.append((k, obs, q, a))
-            controller.activate(source.plan(obs), t, controller.target_estimate())
+            drive = driver if driver is not None and rng.random() < cfg.driver_prob else source
+            controller.activate(drive.plan(obs), t, controller.target_estimate())
         if any(kk + future == k for kk, *_ in pending) and k not in frames:
             frames[k] = world.render()
         if k == n:
@@ -241,12 +263,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="> 0: objects at this height (+ up to 2 cm), moving horizontally; 0: the 3-D workspace")
     p.add_argument("--duration-s", type=float, default=1.0,
                    help="episode length; samples every 0.5 s before it (many short episodes = many scenes)")
+    p.add_argument("--driver-checkpoint", default="",
+                   help="DAgger: a trained policy whose chunks drive the arm (labels stay the expert's)")
+    p.add_argument("--driver-prob", type=float, default=0.0,
+                   help="DAgger: probability that a driving chunk comes from --driver-checkpoint (default 0)")
     p.add_argument("--workers", type=int, default=1, help="parallel processes")
     args = p.parse_args(argv)
     try:
         cfg = CollectConfig(episodes=args.episodes, objects=args.objects, motion=args.motion, speed_m_s=args.speed,
                             image_size_px=args.image_size_px, cameras=tuple(args.cameras), seed=args.seed,
-                            duration_s=args.duration_s, plane_z_m=args.plane_z_m)
+                            duration_s=args.duration_s, plane_z_m=args.plane_z_m,
+                            driver_checkpoint=args.driver_checkpoint, driver_prob=args.driver_prob)
     except ValueError as exc:
         p.error(str(exc))
     n = collect(cfg, Path(args.out), workers=args.workers)

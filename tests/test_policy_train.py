@@ -72,3 +72,26 @@ def test_train_cli_stage0_then_stage2_resume_and_load(syn, tmp_path):
     assert tokens.shape == (16, 7) and actions.shape == (16, 7)
     with pytest.raises(SystemExit, match="needs --init"):
         train_main([*common, "--stage", "1", "--out", str(tmp_path / "s1"), "--steps", "1"])
+
+
+def test_several_dataset_directories_train_together(syn, tmp_path):
+    """``--data A B`` trains on both (e.g. expert demos + DAgger relabels); their layouts must agree."""
+    from policy.dataset import dataset_shards, read_metas
+
+    syn2 = write_synthetic_dataset(tmp_path / "syn2", n_samples=10, shard_size=10, seed=4)
+    meta = read_metas([syn, syn2])
+    assert meta["n_samples"] == 50 and len(dataset_shards([syn, syn2])) == 3
+    common = ["--data", str(syn), str(syn2), "--no-progress", "--seed", "1"]
+    s0 = train_main([*common, "--stage", "0", "--out", str(tmp_path / "s0"), "--steps", "2", "--batch-size", "4"])
+    tiny = ["--d-model", "32", "--layers", "1", "--heads", "2", "--batch-size", "4", "--aux-batch-size", "2",
+            "--eval-samples", "4"]
+    s2 = train_main([*common, "--stage", "2", "--out", str(tmp_path / "s2"), "--init", str(s0), "--steps", "2", *tiny])
+    info = MMActPolicy.load(s2).bundle.info
+    assert info["n_samples"] == 50 and info["train_config"]["aux_batch_size"] == 2
+    bad = json.loads((syn2 / "meta.json").read_text())
+    bad["image_size_px"] = 64
+    (syn2 / "meta.json").write_text(json.dumps(bad))
+    with pytest.raises(DatasetError, match="image_size_px"):
+        read_metas([syn, syn2])
+    with pytest.raises(SystemExit, match="image_size_px"):
+        train_main([*common, "--stage", "0", "--out", str(tmp_path / "s0b"), "--steps", "1"])
