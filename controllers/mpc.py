@@ -1,7 +1,7 @@
 """Task-space MPC between the Ruckig smoother and the 1 kHz inverse-dynamics QP.
 
 At 50-100 Hz the MPC previews the task-space reference (the retargeted chunk, the Kalman
-filter's predicted target) over a short horizon (default 20 x 20 ms = 0.4 s), respects the
+filter's predicted target) over a short horizon (default 10 x 40 ms = 0.4 s), respects the
 joint position / velocity / acceleration limits, and hands the QP a joint- and task-space
 reference for the next interval (:meth:`MPCPlan.sample`, :meth:`MPCPlan.sample_task`).
 
@@ -16,8 +16,8 @@ orientation error (a world-frame rotation vector relative to the current orienta
 The linearization is refreshed at every solve (real-time-iteration style); only the first
 interval of each plan is used before the next solve, where the model is accurate.
 
-Decision variables ``z = [u_0, q_1, dq_1, ..., u_{N-1}, q_N, dq_N]`` (420 for N = 20; the
-current state is a parameter), 280 dynamics equality rows, 7 terminal rows, simple bounds on
+Decision variables ``z = [u_0, q_1, dq_1, ..., u_{N-1}, q_N, dq_N]`` (210 for N = 10; the
+current state is a parameter), 14 N dynamics equality rows, 7 terminal rows, simple bounds on
 every variable.  Cost, per step k = 1..N::
 
     w_pos |p[k] - pos_ref[k-1]|^2 + w_rot |r[k] - rotvec_ref[k-1]|^2 + w_posture |q[k] - q_nom|^2
@@ -28,7 +28,8 @@ plans).  References farther than ``max_ref_dist_m`` / ``max_ref_angle_rad`` from
 pose are pulled in along their direction (the linear model means nothing farther away, and a
 far goal makes the QP badly scaled).
 
-Constraints at every step: ``q`` inside the limits shrunk by ``q_margin_rad``, ``|dq|`` and
+Constraints at every step: ``q`` inside the limits shrunk by ``q_margin_rad`` (and by the at most
+``a_max dt^2 / 8`` a constant-acceleration interval can overshoot its knots), ``|dq|`` and
 ``|u|`` inside ``v_limit_scale`` / ``a_limit_scale`` times the limits, and a terminal
 *braking set* ``q_min <= q[N] + dq[N] * v_max / a_max <= q_max`` (per joint).  It is linear and
 conservative (stopping distance v^2/(2a) <= v v_max / a, and one braking step keeps a state
@@ -137,8 +138,8 @@ class MPCConfig:
             the config stays hashable).
     """
 
-    horizon_steps: int = 20
-    dt_s: float = 0.02
+    horizon_steps: int = 10
+    dt_s: float = 0.04
     rate_hz: float = 50.0
     w_pos: float = 1.0e4
     w_rot: float = 1.0e3
@@ -282,6 +283,11 @@ class _QPBuilder:
             raise ValueError("q_margin_rad leaves no admissible joint range")
         v_max = cfg.v_limit_scale * lim["v_max_rad_s"]
         a_max = cfg.a_limit_scale * lim["a_max_rad_s2"]
+        # The bounds hold at the knots; between two knots a constant acceleration a can carry q at
+        # most a dt^2 / 8 past them (a peak mid-interval): shrink the knot bounds by that much so the
+        # continuous plan, which the 1 kHz QP tracks, stays inside the margined range.
+        q_lo = q_lo + a_max * dt * dt / 8.0
+        q_hi = q_hi - a_max * dt * dt / 8.0
         self.a_max = a_max
         self.n = n
         c_brake = v_max / a_max  # s: conservative terminal braking-set coefficient
@@ -417,6 +423,7 @@ class _OSQPBackend:
         self.solver = osqp.OSQP()
         self._fill_bounds(lba, uba, lbx, ubx)
         self.solver.setup(P=p_mat, q=g, A=a_full, l=self._l, u=self._u, **settings)
+        self._ext = self.solver._solver
         self.last_iter = 0
         self.last_status = 0
 
@@ -433,17 +440,21 @@ class _OSQPBackend:
     def solve(self, p: np.ndarray) -> tuple[np.ndarray, bool]:
         hx, g, ax, lba, uba, lbx, ubx = self._split(self._eval(p))
         self._fill_bounds(lba, uba, lbx, ubx)
+        # OSQP's low-level solver object: the high-level update()/solve() add ~100 us of Python bookkeeping
+        ext = self._ext
+        ext.update_data_vec(q=g, l=self._l, u=self._u)
         if np.array_equal(ax, self._a_last):
-            self.solver.update(Px=hx, q=g, l=self._l, u=self._u)
+            ext.update_data_mat(P_x=hx, P_i=None, A_x=None, A_i=None)
         else:  # not expected with this formulation (A is constant), kept for safety
             self._a_data[self._a_pos] = ax
             self._a_last = ax.copy()
-            self.solver.update(Px=hx, q=g, Ax=self._a_data, l=self._l, u=self._u)
-        res = self.solver.solve(raise_error=False)
-        self.last_iter = int(res.info.iter)
-        self.last_status = int(res.info.status_val)
+            ext.update_data_mat(P_x=hx, P_i=None, A_x=self._a_data, A_i=None)
+        ext.solve()
+        info = ext.info
+        self.last_iter = int(info.iter)
+        self.last_status = int(info.status_val)
         ok = self.last_status in (1, 2)  # solved / solved inaccurate
-        return np.asarray(res.x, dtype=float), ok
+        return np.array(ext.solution.x, dtype=float), ok
 
 
 class _ConicBackend:

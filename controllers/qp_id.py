@@ -13,6 +13,9 @@ limits into acceleration bounds for one control step.
 
 The OSQP problem is set up once with the full sparsity pattern of P (dense upper triangle)
 and A (dense M block + identity); each tick only the values are updated, warm-started.
+The values are assembled by one compiled kernel (``controllers.tick_kernels.assemble_qp``)
+straight into the CSC value arrays; ``problem`` is the same QP in dense numpy form (the
+reference the kernel is tested against, and what cross-checks with other solvers use).
 If OSQP returns neither "solved" nor "solved inaccurate" (the latter is counted in
 ``inaccurate``), or a non-finite solution, the controller falls back to gravity compensation
 with joint damping (within the effort limits) and counts the failure in ``failures``.
@@ -30,6 +33,7 @@ from controllers.limits import JointAccelerationBounds
 from controllers.robot_description import JointLimits
 from controllers.robot_model import RobotTerms
 from controllers.rotations import orientation_error
+from controllers.tick_kernels import assemble_qp, qp_params, torque
 
 
 @dataclass(frozen=True)
@@ -123,6 +127,15 @@ class TaskSpaceQP:
         self._p_idx = np.flatnonzero(p_pattern.ravel(order="F"))
         self._a_idx = np.flatnonzero(a_pattern.ravel(order="F"))
         self._a_full = np.vstack([np.eye(n), np.eye(n)])
+        b = self._bounds
+        self._params = qp_params(self._kp6, self._kd6, self._w6, config.kp_post, config.kd_post, config.w_post,
+                                 config.w_post + config.w_reg, b.q_hi, b.q_lo, b.v_max, b.a_max, self._tau_lim,
+                                 config.dt_s, config.brake_horizon_s)
+        self._P_x = np.empty(len(self._p_idx))
+        self._g = np.empty(n)
+        self._A_x = np.empty(len(self._a_idx))
+        self._l = np.empty(2 * n)
+        self._u = np.empty(2 * n)
         self._solver = osqp.OSQP()
         self._solver.setup(
             P=sp.csc_matrix(p_pattern),
@@ -174,18 +187,21 @@ class TaskSpaceQP:
     def solve(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> np.ndarray:
         """Torques (7,) N*m that track ``ref`` within limits; a safe fallback (counted) if OSQP fails."""
         self.solves += 1
-        P, g, A, lower, upper = self.problem(terms, q_rad, dq_rad_s, ref)
+        assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
+                    ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
+                    self._params, self._P_x, self._g, self._A_x, self._l, self._u)
         ext = self._ext
-        ext.update_data_vec(q=g, l=lower, u=upper)
-        ext.update_data_mat(P_x=P.ravel(order="F")[self._p_idx], P_i=None, A_x=A.ravel(order="F")[self._a_idx], A_i=None)
+        ext.update_data_vec(q=self._g, l=self._l, u=self._u)
+        ext.update_data_mat(P_x=self._P_x, P_i=None, A_x=self._A_x, A_i=None)
         ext.solve()
         status = int(ext.info.status_val)
         ddq = np.array(ext.solution.x)
-        if status in self._ok_status and np.all(np.isfinite(ddq)):
+        tau = np.empty(self.n)
+        if status in self._ok_status and torque(terms.M, terms.h, ddq, tau):  # tau = M ddq + h, all finite
             self.inaccurate += status == self._inaccurate_status
             self.last_ok = True
             self.last_ddq = ddq
-            return terms.M @ ddq + terms.h  # not clipped: the caller measures limit violations
+            return tau  # not clipped: the caller measures limit violations
         self.last_ok = False
         self.failures += 1
         return self.fallback_torque(terms, dq_rad_s)

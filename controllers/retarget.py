@@ -79,3 +79,25 @@ def retarget_offset(
         aim_error = target_at_obs_m - aim_pos_m
         return target_pos_m - target_at_obs_m + alpha * aim_error, target_vel_m_s + dalpha * aim_error
     return np.zeros(3), np.zeros(3)
+
+
+def retarget_offsets(
+    config: RetargetConfig,
+    times_s: np.ndarray,
+    aim_pos_m: np.ndarray,
+    target_at_obs_m: np.ndarray,
+    target_pos_m: np.ndarray,
+    t_active_s: float,
+    t_last_s: float,
+) -> np.ndarray:
+    """Position offsets (N, 3) of :func:`retarget_offset` at many times at once (the MPC's preview).
+
+    ``target_pos_m`` (N, 3) is the predicted target at ``times_s`` (N,)."""
+    times_s = np.asarray(times_s, dtype=float)
+    if config.rule == "displacement":
+        return target_pos_m - target_at_obs_m
+    if config.rule == "snap":
+        span = max(t_last_s - t_active_s, 1e-6)
+        alpha = np.clip((times_s - t_active_s) / span, 0.0, 1.0)
+        return target_pos_m - target_at_obs_m + alpha[:, None] * (target_at_obs_m - aim_pos_m)
+    return np.zeros((len(times_s), 3))

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError
 
+from controllers.tick_kernels import absorb_jump
+
 
 @dataclass(frozen=True)
 class SmootherConfig:
@@ -81,10 +83,12 @@ class _Axis3:
 
     def step_relative(self, ref: np.ndarray, ref_vel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Absorb the reference's jumps into the offset, then let Ruckig take the offset to zero."""
-        offset = self.offset - (ref - self.prev_ref - self.prev_vel * self.dt_s)
-        offset_vel = self.offset_vel - (ref_vel - self.prev_vel)
+        offset, offset_vel = np.empty(3), np.empty(3)
+        # offset - (ref - prev_ref - prev_vel dt), offset_vel - (ref_vel - prev_vel), and whether any is left
+        active = absorb_jump(self.offset, self.offset_vel, self.offset_acc, ref, ref_vel, self.prev_ref, self.prev_vel,
+                             self.dt_s, offset, offset_vel)
         self.prev_ref, self.prev_vel = ref, ref_vel
-        if not (np.any(np.abs(offset) > 1e-9) or np.any(np.abs(offset_vel) > 1e-7) or np.any(np.abs(self.offset_acc) > 1e-5)):
+        if not active:
             # nothing to smooth (and Ruckig's profile search is ill-posed at an exact zero offset)
             self.offset, self.offset_vel, self.offset_acc = self._zeros, self._zeros, self._zeros
             return ref, ref_vel, self._zeros

@@ -120,3 +120,8 @@ class TargetFilter:
         """Predicted position at ``t_s`` (constant-velocity extrapolation from the last estimate)."""
         x = self.kf.x
         return x[:3] + x[3:6] * (t_s - self.t_s)
+
+    def predict_pos_many(self, times_s: np.ndarray) -> np.ndarray:
+        """Predicted positions (N, 3) at ``times_s`` (N,): :meth:`predict_pos`, vectorized."""
+        x = self.kf.x
+        return x[:3] + np.multiply.outer(np.asarray(times_s, dtype=float) - self.t_s, x[3:6])

@@ -8,11 +8,12 @@ import numpy as np
 
 from controllers.mpc import MPCPlan, TaskSpaceMPC
 from controllers.qp_id import TaskReference, TaskSpaceQP
-from controllers.retarget import retarget_offset, trusted
+from controllers.retarget import retarget_offset, retarget_offsets, trusted
 from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import orientation_error, rot_from_rotvec, rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
 from controllers.target_filter import TargetFilter
+from controllers.tick_kernels import sample_plan_task
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.reference import ChunkReference
@@ -136,11 +137,24 @@ class HybridController:
             pos, vel = pos + offset, vel + offset_vel
         return pos, vel, action[3:6], rate[3:6], float(action[6])
 
+    def reference_positions(self, times_s: np.ndarray) -> np.ndarray:
+        """Positions (N, 3) of :meth:`reference` at many times at once (the MPC's preview), vectorized."""
+        times_s = np.asarray(times_s, dtype=float)
+        if self.active is None:
+            return np.tile(self._hold_pos, (len(times_s), 1))
+        if self._ensemble_mode:
+            return np.array([self.reference(t)[0] for t in times_s]).reshape(-1, 3)
+        pos = self.active.sample_positions(times_s)
+        if self._trusted and self.filter.initialized:
+            pos = pos + retarget_offsets(self.config.retarget, times_s, self.active.aim_pos_m, self.active.target_at_obs_m,
+                                         self.filter.predict_pos_many(times_s), self.active.t_active_s, self._blend_end_s)
+        return pos
+
     def _solve_mpc(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms, rot_des: np.ndarray) -> MPCPlan:
         """Preview the reference over the MPC horizon (retargeted chunk, predicted target, and the
         Ruckig offset still to be smoothed away) and plan within the joint limits."""
         taus = self._mpc_taus
-        preview = np.array([self.reference(t_s + tau)[0] for tau in taus])
+        preview = self.reference_positions(t_s + taus)
         if self.config.use_ruckig and self.config.smoother.relative:
             preview = preview + self.smoother.preview_pos_offset(taus)
         return self.mpc.solve(t_s, q_rad, dq_rad_s, terms.pos_m, terms.J, preview, orientation_error(rot_des, terms.rot))
@@ -171,9 +185,10 @@ class HybridController:
                 self._next_mpc_s = t_s + self._mpc_period_s
             ref_pos, rot, ang_vel, ang_acc, gripper = self._slow_ref
             plan = self._plan
-            q_post, dq_plan, ddq_plan = plan.sample(t_s)  # == plan.sample_task, with one sample instead of two
-            jl = plan.ee_jacobian_lin
-            pos, vel, acc = plan.ee_pos_m[0] + jl @ (q_post - plan.q_rad[0]), jl @ dq_plan, jl @ ddq_plan
+            q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
+            sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
+                             plan.ee_jacobian_lin, q_post, task)
+            pos, vel, acc = task[0], task[1], task[2]
         else:
             pos, vel, acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
             ref_pos, q_post = pos, self.q_post

@@ -49,3 +49,9 @@ class ChunkReference:
         s = (t_s - times[i - 1]) / span
         rate = (w[i] - w[i - 1]) / span
         return w[i - 1] + s * (w[i] - w[i - 1]), rate
+
+    def sample_positions(self, times_s: np.ndarray) -> np.ndarray:
+        """Positions (N, 3) at many times at once: :meth:`sample`'s interpolation, vectorized."""
+        w = self.chunk.waypoints
+        times = self.chunk.times_s
+        return np.stack([np.interp(times_s, times, w[:, i]) for i in range(3)], axis=1)

@@ -8,6 +8,7 @@ touched, so runs stay deterministic).
 
 from __future__ import annotations
 
+import math
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
@@ -31,7 +32,7 @@ from scenarios.panda_scene import (  # noqa: E402
     target_mocap_ids,
     tcp_site_id,
 )
-from scenarios.targets import TargetMotion, TargetSpec, make_motion  # noqa: E402
+from scenarios.targets import StaticMotion, TargetMotion, TargetSpec, make_motion  # noqa: E402
 
 #: instruction templates; ``{color}`` is the colour of the instructed object.
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -103,6 +104,7 @@ class SimWorld:
         self._tcp = tcp_site_id(self.model)
         self._mocap = target_mocap_ids(self.model)
         self._motions: list[TargetMotion] = []
+        self._moving: list[tuple[int, TargetMotion]] = []
         self._meas_rng: np.random.Generator | None = None
         self._renderer: mujoco.Renderer | None = None
         self._video_renderer: mujoco.Renderer | None = None
@@ -131,6 +133,8 @@ class SimWorld:
                 raise RuntimeError(f"could not place two objects {MIN_OBJECT_SEPARATION_M} m apart (seed {seed})")
             motions.append(other)
         self._motions = motions
+        # static objects are placed once here; step() moves only the others
+        self._moving = [(i, mo) for i, mo in zip(self._mocap, motions) if not isinstance(mo, StaticMotion)]
         if target_index is None and self.fixed_target_index is not None:
             target_index = self.fixed_target_index
         self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
@@ -165,8 +169,8 @@ class SimWorld:
         if not self._motions:
             raise RuntimeError("SimWorld: call reset(seed) before using the world")
 
-    def _place_objects(self, t_s: float) -> None:
-        for mocap_id, motion in zip(self._mocap, self._motions):
+    def _place_objects(self, t_s: float, moving_only: bool = False) -> None:
+        for mocap_id, motion in (self._moving if moving_only else zip(self._mocap, self._motions)):
             self.data.mocap_pos[mocap_id] = motion.pos_m(t_s)
 
     def _refresh_kinematics(self) -> None:
@@ -183,13 +187,13 @@ class SimWorld:
         tau = np.asarray(tau_nm, dtype=np.float64)
         if tau.shape != (len(ARM_JOINTS),):
             raise ValueError(f"tau_nm must have shape ({len(ARM_JOINTS)},), got {tau.shape}")
-        if not np.all(np.isfinite(tau)) or not np.isfinite(gripper_m):
+        if not np.isfinite(tau).all() or not math.isfinite(gripper_m):
             raise ValueError(f"non-finite command: tau_nm={tau.tolist()}, gripper_m={gripper_m!r}")
         d = self.data
         d.ctrl[self._arm_act] = tau
         d.ctrl[self._grip_act] = gripper_m
         mujoco.mj_step(self.model, d)
-        self._place_objects(d.time)
+        self._place_objects(d.time, moving_only=True)
         self._kinematics_stale = True
 
     def state(self) -> RobotState:

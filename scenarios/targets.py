@@ -19,7 +19,9 @@ TCP position of the Panda scene), so an episode is not solved at t = 0.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol
 
 import numpy as np
@@ -153,7 +155,7 @@ def _fold(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
 
 def _check_t(t_s: float) -> float:
     t = float(t_s)
-    if not np.isfinite(t) or t < 0:
+    if not math.isfinite(t) or t < 0:
         raise ValueError(f"target time t_s must be finite and >= 0, got {t_s!r}")
     return t
 
@@ -196,8 +198,19 @@ class LinearMotion:
     jump_times_s: tuple[float, ...] = ()
 
     def pos_m(self, t_s: float) -> np.ndarray:
+        # _fold(start + v t, low, high) on Python floats: the world moves the object every 1 ms step,
+        # and three scalar folds cost a third of the numpy version's seven array calls
         t = _check_t(t_s)
-        return _fold(self.start_m + self.velocity_m_s * t, self.low_m, self.high_m)
+        out = []
+        for s, v, lo, hi in self._axes:
+            width = hi - lo
+            u = (s + v * t - lo) % (2.0 * width)
+            out.append(lo + (2.0 * width - u if u > width else u))
+        return np.array(out)
+
+    @cached_property
+    def _axes(self) -> tuple[tuple[float, float, float, float], ...]:
+        return tuple(zip(*(np.asarray(a, dtype=float).tolist() for a in (self.start_m, self.velocity_m_s, self.low_m, self.high_m))))
 
 
 @dataclass(frozen=True, eq=False)

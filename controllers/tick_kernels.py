@@ -1,0 +1,218 @@
+"""Compiled (numba) kernels of the 1 kHz path: the per-tick arithmetic between Pinocchio and OSQP.
+
+Why: the C parts of one control tick are small (Pinocchio ~6 us, OSQP ~23 us), but assembling the QP
+from them with numpy costs ~40 small-array calls of ~0.5-1 us each, more than the solvers themselves.
+These kernels do the same arithmetic in one compiled call each (~1 us of dispatch). The numpy versions
+stay the reference: ``TaskSpaceQP.problem``, ``JointAccelerationBounds.__call__``, ``MPCPlan.sample_task``
+and ``pin.log3``; ``tests/test_tick_kernels.py`` holds each kernel to its reference.
+
+``cache=True`` keeps the compiled code next to this file (``__pycache__``), so only the first run of a
+fresh install pays the compile (a few seconds).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# Layout of the ``params`` vector of :func:`assemble_qp` (filled by ``qp_params``).
+_KP6, _KD6, _W6 = 0, 6, 12
+_KP_POST, _KD_POST, _W_POST, _P_DIAG = 18, 19, 20, 21
+_Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = 22, 29, 36, 43, 50
+_DT, _INV_H = 57, 58
+N_PARAMS = 59
+
+
+def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s):
+    """Pack the QP's constants into the flat vector :func:`assemble_qp` reads."""
+    p = np.empty(N_PARAMS)
+    p[_KP6:_KP6 + 6], p[_KD6:_KD6 + 6], p[_W6:_W6 + 6] = kp6, kd6, w6
+    p[_KP_POST], p[_KD_POST], p[_W_POST], p[_P_DIAG] = kp_post, kd_post, w_post, p_diag
+    p[_Q_HI:_Q_HI + 7], p[_Q_LO:_Q_LO + 7], p[_V_MAX:_V_MAX + 7] = q_hi, q_lo, v_max
+    p[_A_MAX:_A_MAX + 7], p[_TAU_LIM:_TAU_LIM + 7] = a_max, tau_lim
+    p[_DT], p[_INV_H] = dt_s, 1.0 / brake_horizon_s
+    return p
+
+
+@njit(cache=True, nogil=True)
+def log3(R, out):
+    """SO(3) logarithm: the rotation vector (rad) of rotation matrix ``R`` into ``out`` (3,).
+
+    Same result as ``pinocchio.log3``: angle in [0, pi], the series form near 0 and the
+    diagonal-based axis near pi (where ``(R - R^T)`` carries no information)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    c = 0.5 * (tr - 1.0)
+    if c > 1.0:
+        c = 1.0
+    elif c < -1.0:
+        c = -1.0
+    theta = math.acos(c)
+    wx = R[2, 1] - R[1, 2]
+    wy = R[0, 2] - R[2, 0]
+    wz = R[1, 0] - R[0, 1]
+    if theta < 1e-4:
+        k = 0.5 + theta * theta / 12.0  # theta / (2 sin theta), series
+        out[0], out[1], out[2] = k * wx, k * wy, k * wz
+    elif theta < math.pi - 1e-3:
+        k = theta / (2.0 * math.sin(theta))
+        out[0], out[1], out[2] = k * wx, k * wy, k * wz
+    else:  # near pi: axis from the diagonal of (R + I) / 2 = a a^T (for theta = pi), sign from the skew part
+        inv = 1.0 / (1.0 - c)
+        ax = math.sqrt(max(0.0, (R[0, 0] - c) * inv))
+        ay = math.sqrt(max(0.0, (R[1, 1] - c) * inv))
+        az = math.sqrt(max(0.0, (R[2, 2] - c) * inv))
+        if ax >= ay and ax >= az:
+            if wx < 0.0:
+                ax = -ax
+            ay = math.copysign(ay, ax * (R[0, 1] + R[1, 0]))
+            az = math.copysign(az, ax * (R[0, 2] + R[2, 0]))
+        elif ay >= az:
+            if wy < 0.0:
+                ay = -ay
+            ax = math.copysign(ax, ay * (R[0, 1] + R[1, 0]))
+            az = math.copysign(az, ay * (R[1, 2] + R[2, 1]))
+        else:
+            if wz < 0.0:
+                az = -az
+            ax = math.copysign(ax, az * (R[0, 2] + R[2, 0]))
+            ay = math.copysign(ay, az * (R[1, 2] + R[2, 1]))
+        n = math.sqrt(ax * ax + ay * ay + az * az)
+        out[0], out[1], out[2] = theta * ax / n, theta * ay / n, theta * az / n
+
+
+@njit(cache=True, nogil=True)
+def accel_bounds(q, dq, q_hi, q_lo, v_max, a_max, dt_s, inv_h, lb, ub):
+    """Joint acceleration bounds of one control step into ``lb``, ``ub`` (7,); the arithmetic of
+    ``JointAccelerationBounds.__call__`` (see there for the rules)."""
+    inv_dt = 1.0 / dt_s
+    for i in range(q.shape[0]):
+        qn = q[i] + dq[i] * dt_s
+        d_hi = max(q_hi[i] - qn, 0.0)
+        d_lo = max(qn - q_lo[i], 0.0)
+        v_hi = min(v_max[i], math.sqrt(2.0 * a_max[i] * d_hi), d_hi * inv_h)
+        v_lo = -min(v_max[i], math.sqrt(2.0 * a_max[i] * d_lo), d_lo * inv_h)
+        u = min(a_max[i], (v_hi - dq[i]) * inv_dt)
+        lo = max(-a_max[i], (v_lo - dq[i]) * inv_dt)
+        if lo > u:  # outside the viable set: brake toward the nearest viable velocity
+            v_near = min(max(dq[i], v_lo), v_hi)
+            brake = min(max((v_near - dq[i]) * inv_dt, -a_max[i]), a_max[i])
+            lo, u = brake, brake
+        lb[i], ub[i] = lo, u
+
+
+@njit(cache=True, nogil=True)
+def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot, ref_w, ref_dw, q_post, q, dq,
+                params, P_x, g, A_x, lower, upper):
+    """The task-space inverse-dynamics QP of one tick, written straight into OSQP's CSC value arrays.
+
+    Same problem as ``TaskSpaceQP.problem`` (see there): ``P = J^T W J + p_diag I`` (upper triangle,
+    column-major, 28 values), ``g``, ``A = [M; I]`` (column-major, 8 values per column) and the bounds
+    ``[-tau_lim - h, lb] <= A ddq <= [tau_lim - h, ub]``."""
+    n = 7
+    # task-space error and desired acceleration
+    R = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = ref_rot[i, 0] * rot[j, 0] + ref_rot[i, 1] * rot[j, 1] + ref_rot[i, 2] * rot[j, 2]
+    e_rot = np.empty(3)
+    log3(R, e_rot)
+    r = np.empty(6)  # dJv - a_des, weighted below
+    for i in range(3):
+        e, v, a = ref_pos[i] - pos[i], ref_vel[i] - vel[i], ref_acc[i]
+        r[i] = dJv[i] - (a + params[_KP6 + i] * e + params[_KD6 + i] * v)
+        e, v, a = e_rot[i], ref_w[i] - vel[3 + i], ref_dw[i]
+        r[3 + i] = dJv[3 + i] - (a + params[_KP6 + 3 + i] * e + params[_KD6 + 3 + i] * v)
+    # P = J^T W J + diag, g = (dJv - a_des)^T W J - w_post ddq_post
+    k = 0
+    for j in range(n):
+        for i in range(j + 1):
+            s = 0.0
+            for t in range(6):
+                s += J[t, i] * params[_W6 + t] * J[t, j]
+            if i == j:
+                s += params[_P_DIAG]
+            P_x[k] = s
+            k += 1
+    kp, kd, wp = params[_KP_POST], params[_KD_POST], params[_W_POST]
+    for j in range(n):
+        s = 0.0
+        for t in range(6):
+            s += r[t] * params[_W6 + t] * J[t, j]
+        g[j] = s - wp * (kp * (q_post[j] - q[j]) - kd * dq[j])
+    # A = [M; I] column-major, bounds
+    k = 0
+    for j in range(n):
+        for i in range(n):
+            A_x[k] = M[i, j]
+            k += 1
+        A_x[k] = 1.0
+        k += 1
+    for i in range(n):
+        lower[i] = -params[_TAU_LIM + i] - h[i]
+        upper[i] = params[_TAU_LIM + i] - h[i]
+    accel_bounds(q, dq, params[_Q_HI:_Q_HI + 7], params[_Q_LO:_Q_LO + 7], params[_V_MAX:_V_MAX + 7],
+                 params[_A_MAX:_A_MAX + 7], params[_DT], params[_INV_H], lower[n:], upper[n:])
+
+
+@njit(cache=True, nogil=True)
+def torque(M, h, ddq, out):
+    """``out = M ddq + h``; returns whether ``ddq`` and ``out`` are all finite."""
+    ok = True
+    for j in range(ddq.shape[0]):
+        ok = ok and math.isfinite(ddq[j])
+    for i in range(M.shape[0]):
+        s = h[i]
+        for j in range(M.shape[1]):
+            s += M[i, j] * ddq[j]
+        out[i] = s
+        ok = ok and math.isfinite(s)
+    return ok
+
+
+@njit(cache=True, nogil=True)
+def sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out, task_out):
+    """``MPCPlan.sample`` + ``sample_task`` in one call: the joint reference ``q(t)`` into ``q_out`` (7,)
+    and the linearized TCP (pos, vel, acc) into the rows of ``task_out`` (3, 3)."""
+    n = ddq.shape[0]
+    nj = q_knots.shape[1]
+    tau = t_s - t0_s
+    dq_t = np.zeros(nj)
+    dd_t = np.zeros(nj)
+    if tau >= n * dt_s:
+        for i in range(nj):
+            q_out[i] = q_knots[n, i]
+    else:
+        if tau < 0.0:
+            tau = 0.0
+        k = min(int(math.floor(tau / dt_s + 1e-9)), n - 1)
+        s = max(tau - k * dt_s, 0.0)
+        for i in range(nj):
+            a = ddq[k, i]
+            q_out[i] = q_knots[k, i] + dq_knots[k, i] * s + 0.5 * a * s * s
+            dq_t[i] = dq_knots[k, i] + a * s
+            dd_t[i] = a
+    for r in range(3):
+        p, v, a = ee_pos0[r], 0.0, 0.0
+        for i in range(nj):
+            p += jl[r, i] * (q_out[i] - q_knots[0, i])
+            v += jl[r, i] * dq_t[i]
+            a += jl[r, i] * dd_t[i]
+        task_out[0, r], task_out[1, r], task_out[2, r] = p, v, a
+
+
+@njit(cache=True, nogil=True)
+def absorb_jump(offset, offset_vel, offset_acc, ref, ref_vel, prev_ref, prev_vel, dt_s, new_offset, new_offset_vel):
+    """Relative Ruckig smoothing (``controllers.smoother``): the offset after absorbing this step's jump of
+    the reference into ``new_offset``, ``new_offset_vel`` (3,); returns whether any offset is left to smooth
+    (position > 1e-9 m, velocity > 1e-7, acceleration > 1e-5)."""
+    active = False
+    for i in range(3):
+        o = offset[i] - (ref[i] - prev_ref[i] - prev_vel[i] * dt_s)
+        ov = offset_vel[i] - (ref_vel[i] - prev_vel[i])
+        new_offset[i] = o
+        new_offset_vel[i] = ov
+        if abs(o) > 1e-9 or abs(ov) > 1e-7 or abs(offset_acc[i]) > 1e-5:
+            active = True
+    return active
