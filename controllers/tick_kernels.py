@@ -4,7 +4,7 @@ Why: the C parts of one control tick are small (Pinocchio ~6 us, OSQP ~23 us), b
 from them with numpy costs ~40 small-array calls of ~0.5-1 us each, more than the solvers themselves.
 These kernels do the same arithmetic in one compiled call each (~1 us of dispatch). The numpy versions
 stay the reference: ``TaskSpaceQP.problem``, ``JointAccelerationBounds.__call__``, ``MPCPlan.sample_task``
-and ``pin.log3``; ``tests/test_tick_kernels.py`` holds each kernel to its reference.
+and ``pin.log3``; ``tests/test_fast_paths.py`` holds each kernel to its reference.
 
 ``cache=True`` keeps the compiled code next to this file (``__pycache__``), so only the first run of a
 fresh install pays the compile (a few seconds).

@@ -38,12 +38,12 @@ class HybridController:
         self.config = config
         self.model = model if model is not None else PandaModel()
         self.qp = TaskSpaceQP(replace(config.qp, dt_s=config.dt_s))
-        # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
-        smoother_dt_s = 1.0 / config.mpc.rate_hz if (config.mode == "hybrid" and config.use_mpc) else config.dt_s
-        self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
-        self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
         self.hybrid = config.mode == "hybrid"
         self.use_mpc = self.hybrid and config.use_mpc
+        # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
+        smoother_dt_s = 1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s
+        self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
+        self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
         self.mpc = TaskSpaceMPC(config.mpc, q_nominal_rad=self.model.home_q_rad) if self.use_mpc else None
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)

@@ -73,7 +73,11 @@ def read_metas(paths: str | Path | list[str | Path]) -> dict[str, Any]:
 def dataset_shards(paths: str | Path | list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
     """Every shard of one or several dataset directories, each with its own directory's meta."""
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
-    return [(s, read_meta(p)) for p in paths for s in shard_paths(p)]
+    out = []
+    for p in paths:
+        meta = read_meta(p)
+        out += [(s, meta) for s in shard_paths(p)]
+    return out
 
 
 def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:

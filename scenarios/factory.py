@@ -13,6 +13,10 @@ from scenarios.panda_scene import SceneConfig
 from scenarios.sim_world import SimWorld
 from scenarios.targets import target_spec
 
+#: height (m) of the balls in the learned policy's scenes (``scenarios.collect --plane-z-m``): from its one
+#: camera a ball's depth is only determined when all balls lie at one height.
+POLICY_PLANE_Z_M = 0.1
+
 
 def make_world(target: str = "linear", speed_m_s: float = 0.2, noise_m: float = 0.002, dropout: float = 0.1,
                n_objects: int = 1, plane_z_m: float = 0.0, instruction: str | None = None,

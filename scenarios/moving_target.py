@@ -25,7 +25,7 @@ from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
 from scenarios.targets import KINDS as TARGET_KINDS
-from scenarios.factory import make_expert, make_world
+from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
     w.add_argument("--plane-z-m", type=_plane, default="auto",
                    help="objects at this height (+ up to 2 cm) moving horizontally, as in the policy's training scenes; "
-                        "0 = the full 3-D workspace; auto = 0.1 with --source policy, 0 with --source expert")
+                        f"0 = the full 3-D workspace; auto = {POLICY_PLANE_Z_M} with --source policy, 0 with --source expert")
     w.add_argument("--objects", type=int, choices=(1, 2), default=2,
                    help="objects in the scene (two differently coloured balls: the instruction names one)")
     w.add_argument("--instruction", metavar="TEXT", default=None,
@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
-    plane_z_m = (0.1 if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
+    plane_z_m = (POLICY_PLANE_Z_M if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
     source = make_source(args)
     world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
                        plane_z_m=plane_z_m, instruction=args.instruction)

@@ -147,7 +147,7 @@ class SimWorld:
         d.qpos[self._arm_qpos] = HOME_Q_RAD
         d.qpos[self._finger_qpos] = GRIPPER_MAX_M / 2.0
         d.ctrl[self._grip_act] = GRIPPER_MAX_M
-        self._place_objects(0.0)
+        self._place_objects(0.0, zip(self._mocap, self._motions))
         mujoco.mj_forward(m, d)
         self._kinematics_stale = False
         return self.state()
@@ -169,8 +169,9 @@ class SimWorld:
         if not self._motions:
             raise RuntimeError("SimWorld: call reset(seed) before using the world")
 
-    def _place_objects(self, t_s: float, moving_only: bool = False) -> None:
-        for mocap_id, motion in (self._moving if moving_only else zip(self._mocap, self._motions)):
+    def _place_objects(self, t_s: float, placements) -> None:
+        """Move the mocap bodies of ``placements`` ((mocap id, motion) pairs) to their positions at ``t_s``."""
+        for mocap_id, motion in placements:
             self.data.mocap_pos[mocap_id] = motion.pos_m(t_s)
 
     def _refresh_kinematics(self) -> None:
@@ -193,7 +194,7 @@ class SimWorld:
         d.ctrl[self._arm_act] = tau
         d.ctrl[self._grip_act] = gripper_m
         mujoco.mj_step(self.model, d)
-        self._place_objects(d.time, moving_only=True)
+        self._place_objects(d.time, self._moving)
         self._kinematics_stale = True
 
     def state(self) -> RobotState:

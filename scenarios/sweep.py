@@ -112,12 +112,12 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
     from mmact_ctrl.metrics import episode_metrics
-    from scenarios.factory import make_expert, make_world
+    from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
 
     source_name = cell.get("source", "expert")
     wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
     if wkey not in _CACHE:  # the policy's scenes: two balls at one height (as in scenarios.collect)
-        policy_scene = dict(n_objects=2, plane_z_m=0.1) if source_name == "policy" else {}
+        policy_scene = dict(n_objects=2, plane_z_m=POLICY_PLANE_Z_M) if source_name == "policy" else {}
         _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **policy_scene)
     if source_name == "policy":
         if "policy" not in _CACHE:
