@@ -85,9 +85,14 @@ def test_several_dataset_directories_train_together(syn, tmp_path):
     s0 = train_main([*common, "--stage", "0", "--out", str(tmp_path / "s0"), "--steps", "2", "--batch-size", "4"])
     tiny = ["--d-model", "32", "--layers", "1", "--heads", "2", "--batch-size", "4", "--aux-batch-size", "2",
             "--eval-samples", "4"]
-    s2 = train_main([*common, "--stage", "2", "--out", str(tmp_path / "s2"), "--init", str(s0), "--steps", "2", *tiny])
+    s2 = train_main([*common, "--stage", "2", "--out", str(tmp_path / "s2"), "--init", str(s0), "--steps", "2",
+                     "--data-weights", "1", "3", *tiny])
     info = MMActPolicy.load(s2).bundle.info
     assert info["n_samples"] == 50 and info["train_config"]["aux_batch_size"] == 2
+    assert "--data-weights 1 3" in info["command"]
+    with pytest.raises(SystemExit, match="2 --data directories"):
+        train_main([*common, "--stage", "2", "--out", str(tmp_path / "s2b"), "--init", str(s0), "--steps", "1",
+                    "--data-weights", "1", *tiny])
     bad = json.loads((syn2 / "meta.json").read_text())
     bad["image_size_px"] = 64
     (syn2 / "meta.json").write_text(json.dumps(bad))
@@ -95,3 +100,32 @@ def test_several_dataset_directories_train_together(syn, tmp_path):
         read_metas([syn, syn2])
     with pytest.raises(SystemExit, match="image_size_px"):
         train_main([*common, "--stage", "0", "--out", str(tmp_path / "s0b"), "--steps", "1"])
+
+
+def test_data_weights_set_how_often_each_directory_is_drawn():
+    from policy.train import sampling_probabilities
+
+    source = np.array([0] * 30 + [1] * 10)
+    assert sampling_probabilities(source, None, 2) is None
+    p = sampling_probabilities(source, [1.0, 3.0], 2)
+    assert p.sum() == pytest.approx(1.0)
+    assert p[35] == pytest.approx(3 * p[0])  # a weight-3 sample is drawn three times as often
+    assert p[source == 1].sum() == pytest.approx(0.5)  # 10 samples x 3 = 30 samples x 1
+    draws = np.random.default_rng(0).choice(len(source), size=20000, p=p)
+    assert np.mean(source[draws] == 1) == pytest.approx(0.5, abs=0.02)
+    for bad, match in (([1.0], "1 weights for 2"), ([1.0, -1.0], ">= 0"), ([0.0, 0.0], "weight 0"),
+                       ([1.0, float("nan")], "finite")):
+        with pytest.raises(SystemExit, match=match):
+            sampling_probabilities(source, bad, 2)
+
+
+def test_eval_subset_represents_every_directory():
+    """The held-out indices are sorted by directory: the evaluation subset must not be only the first one."""
+    from policy.train import eval_subset
+
+    _, val = split_indices(2000, 0.1, 1234)
+    sub = eval_subset(val, 64, 1234)
+    assert len(sub) == 64 and len(np.unique(sub)) == 64 and np.all(np.isin(sub, val))
+    assert np.mean(sub >= 1000) == pytest.approx(0.5, abs=0.2)  # a second directory of the same size shows up
+    assert np.array_equal(eval_subset(val, 64, 1234), sub)  # seeded
+    assert np.array_equal(eval_subset(val[:10], 64, 1234), val[:10])
