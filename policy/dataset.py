@@ -70,13 +70,13 @@ def read_metas(paths: str | Path | list[str | Path]) -> dict[str, Any]:
     return meta
 
 
-def dataset_shards(paths: str | Path | list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
-    """Every shard of one or several dataset directories, each with its own directory's meta."""
+def dataset_shards(paths: str | Path | list[str | Path]) -> list[tuple[int, Path, dict[str, Any]]]:
+    """Every shard of one or several dataset directories as ``(directory index, shard path, that directory's meta)``."""
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
     out = []
-    for p in paths:
+    for k, p in enumerate(paths):
         meta = read_meta(p)
-        out += [(s, meta) for s in shard_paths(p)]
+        out += [(k, s, meta) for s in shard_paths(p)]
     return out
 
 

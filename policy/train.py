@@ -57,12 +57,10 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
     from tqdm import tqdm
 
     read_metas(data_path)  # the directories must agree on the token layout
-    paths = [data_path] if isinstance(data_path, (str, Path)) else list(data_path)
     cfg = bundle.model_cfg
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("img", "fut", "instr", "quest", "answer", "answer_str", "state",
                                                            "action", "actions_f", "target_pos_m", "source")}
-    shards = [(k, shard, meta) for k, p in enumerate(paths) for shard, meta in dataset_shards(p)]
-    for k, shard, meta in tqdm(shards, desc="tokenizing shards", disable=not progress):
+    for k, shard, meta in tqdm(dataset_shards(data_path), desc="tokenizing shards", disable=not progress):
         d = read_shard(shard, meta)
         parts["source"].append(np.full(len(d["q_rad"]), k, dtype=np.int16))
         parts["img"].append(bundle.image_codes(d["images"]).astype(np.int16))
@@ -188,9 +186,8 @@ def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray,
         res["n_eval_near"] = int(near.sum())
         if near.any():
             res["final_waypoint_to_target_near_m"] = float(final[near].mean())
-        if "source" in data:
-            for k in np.unique(data["source"][idx]):
-                res[f"final_waypoint_to_target_m_data{int(k)}"] = float(final[data["source"][idx] == k].mean())
+        for k in np.unique(data["source"][idx]):
+            res[f"final_waypoint_to_target_m_data{int(k)}"] = float(final[data["source"][idx] == k].mean())
     return res
 
 
@@ -200,7 +197,7 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
     torch.manual_seed(args.seed)
     frames, corpus = [], []
     n_total = 0
-    for shard, shard_meta in dataset_shards(args.data):
+    for _, shard, shard_meta in dataset_shards(args.data):
         d = read_shard(shard, shard_meta)
         n_total += len(d["images"])
         corpus += list(d["instructions"]) + list(d["questions"]) + list(d["answers"])
@@ -236,6 +233,17 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
 
 
 # ---------------------------------------------------------------- stages 1 / 2
+def check_data_weights(weights: list[float] | None, n_dirs: int) -> None:
+    """``--data-weights``: one finite weight >= 0 per ``--data`` directory (checked before any data is read)."""
+    if weights is None:
+        return
+    if len(weights) != n_dirs:
+        raise SystemExit(f"--data-weights: got {len(weights)} weights for {n_dirs} --data directories")
+    w = np.asarray(weights, dtype=np.float64)
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise SystemExit(f"--data-weights must be finite and >= 0, got {list(weights)}")
+
+
 def sampling_probabilities(source: np.ndarray, weights: list[float] | None, n_dirs: int) -> np.ndarray | None:
     """Per-sample draw probabilities from one weight per dataset directory (None: uniform over samples).
 
@@ -243,12 +251,8 @@ def sampling_probabilities(source: np.ndarray, weights: list[float] | None, n_di
     favour the newest DAgger round over the bulk of the expert demonstrations."""
     if weights is None:
         return None
-    if len(weights) != n_dirs:
-        raise SystemExit(f"--data-weights: got {len(weights)} weights for {n_dirs} --data directories")
-    w = np.asarray(weights, dtype=np.float64)
-    if not np.all(np.isfinite(w)) or np.any(w < 0):
-        raise SystemExit(f"--data-weights must be finite and >= 0, got {list(weights)}")
-    p = w[source]
+    check_data_weights(weights, n_dirs)
+    p = np.asarray(weights, dtype=np.float64)[source]
     if p.sum() <= 0:
         raise SystemExit(f"--data-weights {list(weights)} give every training sample weight 0")
     return p / p.sum()
@@ -328,7 +332,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     tasks = [t for t in ("mm2a", "t2i", "mmu") if getattr(tc.weights, TASK_WEIGHT[t]) > 0]
     if not tasks:
         raise SystemExit("all loss weights are 0")
-    use_amp = device.startswith("cuda") or bool(getattr(args, "amp", False))
+    use_amp = device.startswith("cuda") or args.amp
     amp_device = "cuda" if device.startswith("cuda") else "cpu"
     ema: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -481,6 +485,7 @@ def main(argv: list[str] | None = None) -> Path:
         torch.set_num_threads(args.threads)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda but no CUDA device is available")
+    check_data_weights(args.data_weights, len(args.data))
     try:
         meta = read_metas(args.data)
     except DatasetError as exc:
