@@ -226,8 +226,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # bad configuration: one clear line
         parser.error(str(exc))
     logs = payload.pop("_logs")
+    # a static target has no speed: printing --speed's default next to it read as if it moved
+    target_desc = "static target" if args.target == "static" else f"{args.target} target at {args.speed:g} m/s"
     print(
-        f"\n{args.source} source, {args.objects} object(s), {args.target} target at {args.speed:g} m/s, replan {args.replan_hz:g} Hz, latency {args.latency_ms if args.latency_ms == 'measured' else f'{args.latency_ms:g}'} ms, "
+        f"\n{args.source} source, {args.objects} object(s), {target_desc}, replan {args.replan_hz:g} Hz, latency {args.latency_ms if args.latency_ms == 'measured' else f'{args.latency_ms:g}'} ms, "
         f"{args.bins or 'no'} bins, {args.episodes} episodes x {args.duration_s:g} s per mode "
         f"({time.perf_counter() - t0:.1f} s wall)\n"
     )
@@ -238,7 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         from mmact_ctrl.plotting import plot_runs
 
-        title = (f"{args.source}, {args.target} target {args.speed:g} m/s, replan {args.replan_hz:g} Hz, "
+        title = (f"{args.source}, {target_desc}, replan {args.replan_hz:g} Hz, "
                  f"latency {args.latency_ms} ms, bins {args.bins}")
         plot_runs(logs, args.plot, title=title)
         print(f"wrote {args.plot}")
