@@ -186,8 +186,9 @@ def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray,
         res["n_eval_near"] = int(near.sum())
         if near.any():
             res["final_waypoint_to_target_near_m"] = float(final[near].mean())
-        for k in np.unique(data["source"][idx]):
-            res[f"final_waypoint_to_target_m_data{int(k)}"] = float(final[data["source"][idx] == k].mean())
+        source = data["source"][idx]
+        for k in np.unique(source):
+            res[f"final_waypoint_to_target_m_data{int(k)}"] = float(final[source == k].mean())
     return res
 
 

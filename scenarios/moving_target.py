@@ -228,11 +228,11 @@ def main(argv: list[str] | None = None) -> int:
     logs = payload.pop("_logs")
     # a static target has no speed: printing --speed's default next to it read as if it moved
     target_desc = "static target" if args.target == "static" else f"{args.target} target at {args.speed:g} m/s"
-    print(
-        f"\n{args.source} source, {args.objects} object(s), {target_desc}, replan {args.replan_hz:g} Hz, latency {args.latency_ms if args.latency_ms == 'measured' else f'{args.latency_ms:g}'} ms, "
-        f"{args.bins or 'no'} bins, {args.episodes} episodes x {args.duration_s:g} s per mode "
-        f"({time.perf_counter() - t0:.1f} s wall)\n"
-    )
+    latency = args.latency_ms if args.latency_ms == "measured" else f"{args.latency_ms:g}"
+    run_desc = (f"{args.source} source, {args.objects} object(s), {target_desc}, replan {args.replan_hz:g} Hz, "
+                f"latency {latency} ms, {args.bins or 'no'} bins")  # one description: table header and plot title
+    print(f"\n{run_desc}, {args.episodes} episodes x {args.duration_s:g} s per mode "
+          f"({time.perf_counter() - t0:.1f} s wall)\n")
     print(format_table({m: r["summary"] for m, r in payload["runs"].items()}))
     if args.json:
         write_json(args.json, payload)
@@ -240,9 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         from mmact_ctrl.plotting import plot_runs
 
-        title = (f"{args.source}, {target_desc}, replan {args.replan_hz:g} Hz, "
-                 f"latency {args.latency_ms} ms, bins {args.bins}")
-        plot_runs(logs, args.plot, title=title)
+        plot_runs(logs, args.plot, title=run_desc)
         print(f"wrote {args.plot}")
     if args.video:
         from scenarios.video import write_mp4
