@@ -15,6 +15,9 @@ class PolicyChunkSource:
     Args:
         checkpoint: path of the trained checkpoint (``policy.inference.DEFAULT_CHECKPOINT`` if None).
         action_steps: 1 = the whole chunk in one forward pass; k > 1 = k-step confidence re-masking.
+        refine_bins: 0 = bin centres of the greedy tokens; W > 0 = probability-weighted mean bin within
+            +-W bins of each greedy token; None = the checkpoint's matched window
+            (``MMActPolicy.default_refine_bins``, 64 for the shipped one).
         torch_threads: intra-op threads for torch (process-wide; measured here: 1 thread 25 ms, 2 threads
             on the busy 2-core machine 79 ms per call); None leaves torch's setting alone.
     """
@@ -22,7 +25,7 @@ class PolicyChunkSource:
     needs_image = True
 
     def __init__(self, checkpoint: str | Path | None = None, action_steps: int = 1, device: str = "cpu",
-                 torch_threads: int | None = 1) -> None:
+                 refine_bins: int | None = None, torch_threads: int | None = 1) -> None:
         import torch
 
         from policy.inference import DEFAULT_CHECKPOINT, MMActPolicy
@@ -35,7 +38,10 @@ class PolicyChunkSource:
             raise ValueError(f"policy checkpoint {str(path)!r} does not exist (train one with python -m policy.train)")
         if action_steps < 1:
             raise ValueError(f"action_steps must be >= 1, got {action_steps}")
+        if refine_bins is not None and refine_bins < 0:
+            raise ValueError(f"refine_bins must be >= 0, got {refine_bins}")
         self.policy = MMActPolicy.load(path, device=device)
+        self.refine_bins = self.policy.default_refine_bins if refine_bins is None else int(refine_bins)
         self.action_steps = int(action_steps)
         self.checkpoint = path
 
@@ -50,7 +56,7 @@ class PolicyChunkSource:
         if observation.image is None:
             raise ValueError("the policy needs the camera frame: Observation.image is None")
         tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
-                                                    action_steps=self.action_steps)
+                                                    action_steps=self.action_steps, refine_bins=self.refine_bins)
         return self._chunk(tokens, actions, observation)
 
     def plan_inpaint(self, observation: Observation, known: np.ndarray) -> ActionChunk:
@@ -63,5 +69,6 @@ class PolicyChunkSource:
         known_tokens = np.full((self.policy.horizon, 7), -1, dtype=np.int64)
         known_tokens[:n] = self.policy.action_tokenizer.encode(known[:n])[0]
         tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
-                                                    action_steps=self.action_steps, known_actions=known_tokens)
+                                                    action_steps=self.action_steps, known_actions=known_tokens,
+                                                    refine_bins=self.refine_bins)
         return self._chunk(tokens, actions, observation)

@@ -99,6 +99,17 @@ class ActionTokenizer:
             )
         return self.low + (idx + 0.5) * self.bin_width
 
+    def decode_fractional(self, bin_index: np.ndarray) -> np.ndarray:
+        """Fractional bin indices ``(..., 7)`` (0-based, e.g. from ``policy.decoding.expected_bins``) ->
+        actions ``(..., 7)``; integer indices give the bin centres, as ``decode`` does."""
+        b = np.asarray(bin_index, dtype=np.float64)
+        if b.shape[-1:] != (ACTION_DIM,):
+            raise ValueError(f"bin indices must have shape (..., {ACTION_DIM}), got {b.shape}")
+        bad = ~np.isfinite(b) | (b < 0) | (b > self.bins - 1)
+        if np.any(bad):
+            raise ValueError(f"bin indices must be finite and in [0, {self.bins - 1}], got {float(b[bad].flat[0])}")
+        return self.low + (b + 0.5) * self.bin_width
+
     def roundtrip(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """Quantize then dequantize: (dequantized actions, tokens, n_clipped)."""
         tokens, n_clipped = self.encode(actions)

@@ -5,7 +5,8 @@
 Times (ms, batch 1, ``torch.no_grad``, greedy) of the model + decoding given tokenized inputs
 (``mm2a_ms``, ``k_step_ms``, ``autoregressive_ms``: each ``median`` / ``p99``), the full
 ``predict_chunk`` including VQ-encoding the frames and tokenizing text and state
-(``predict_chunk_ms``), and the one-pass latency as views grow (``views``). ``speedup`` =
+(``predict_chunk_ms``, with the checkpoint's sub-bin refinement window ``refine_bins``; the same
+with bin centres: ``predict_chunk_bin_centres_ms``), and the one-pass latency as views grow (``views``). ``speedup`` =
 autoregressive median / one-pass median. Without a checkpoint (none given and
 ``DEFAULT_CHECKPOINT`` absent) a randomly initialised model of the default size is timed: the
 latency is the same, the actions are meaningless.
@@ -62,6 +63,8 @@ def run_bench(policy: MMActPolicy, repeats: int = 30, ar_repeats: int = 3, k: in
         res["k_step_ms"] = {**_time(lambda: decode_parallel(m, toks, lay, k), max(5, repeats // 3)), "k": k}
         res["autoregressive_ms"] = _time(lambda: decode_autoregressive(m, toks, lay), ar_repeats, warmup=1)
         res["predict_chunk_ms"] = _time(lambda: policy.predict_chunk(img, instr, q), repeats)
+        res["refine_bins"] = policy.default_refine_bins
+        res["predict_chunk_bin_centres_ms"] = _time(lambda: policy.predict_chunk(img, instr, q, refine_bins=0), repeats)
         res["views"] = {}
         for v in views:
             if v > policy.bundle.model_cfg.max_views:
@@ -101,7 +104,8 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"k={a.k} re-masking: median {res['k_step_ms']['median']:.1f} ms")
     print(f"autoregressive ({res['chunk_tokens']} passes): median {res['autoregressive_ms']['median']:.1f} ms -> "
           f"speedup {res['speedup']:.1f}x")
-    print(f"predict_chunk (incl. tokenizing): median {res['predict_chunk_ms']['median']:.1f} ms")
+    print(f"predict_chunk (incl. tokenizing, refine +-{res['refine_bins']} bins): median "
+          f"{res['predict_chunk_ms']['median']:.1f} ms; with bin centres {res['predict_chunk_bin_centres_ms']['median']:.1f} ms")
     for v, r in res["views"].items():
         print(f"  {v} view(s): L={r['sequence_length']}, mm2a median {r['mm2a_ms']['median']:.1f} ms, "
               f"predict_chunk {r['predict_chunk_ms']['median']:.1f} ms")

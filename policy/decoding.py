@@ -8,6 +8,8 @@ holds only tokens of that kind. Decoding is greedy (argmax), hence deterministic
 - ``decode_parallel(steps=1)``: every unknown position filled from ONE forward pass (mm2a default).
 - ``decode_parallel(steps=k)``: MaskGIT-style: after pass ``s`` the ``ceil(n * cos(pi/2 * s/k))``
   least confident predictions are masked again (cosine schedule); t2i and mmu use this.
+- ``expected_bins``: optional sub-bin refinement of an action token from its logits (the local
+  probability-weighted mean around the chosen bin), for detokenizing to continuous values.
 - ``decode_autoregressive``: one position per forward pass, left to right, for comparison.
 """
 
@@ -31,6 +33,14 @@ def cosine_masked_count(n_unknown: int, step: int, steps: int) -> int:
 @torch.no_grad()
 def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, steps: int = 1) -> torch.Tensor:
     """Fill the masked target positions in ``steps`` passes; returns a new ``(B, L)`` tensor."""
+    return decode_parallel_logits(model, tokens, layout, steps)[0]
+
+
+@torch.no_grad()
+def decode_parallel_logits(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout,
+                           steps: int = 1) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """``decode_parallel`` that also returns the last pass's target logits ``(B, T, range)``
+    (None when nothing was masked, so no pass ran)."""
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
     mask_id = model.vocab.mask_id
@@ -40,6 +50,7 @@ def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, 
     tgt = out[:, idx]
     unknown0 = tgt == mask_id  # (B, T)
     n0 = unknown0.sum(1)  # per sample
+    logits = None
     for s in range(1, steps + 1):
         unknown = out[:, idx] == mask_id
         if not bool(unknown.any()):
@@ -60,7 +71,7 @@ def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, 
             remask = unknown & (rank < keep_masked[:, None])
             filled = torch.where(remask, torch.full_like(filled, mask_id), filled)
         out[:, idx] = filled
-    return out
+    return out, logits
 
 
 @torch.no_grad()
@@ -78,6 +89,27 @@ def decode_autoregressive(model: MMActModel, tokens: torch.Tensor, layout: SeqLa
         pred = model.logits(h, layout.target_modality).argmax(-1) + lo
         out[:, pos] = torch.where(unknown, pred, col)
     return out
+
+
+@torch.no_grad()
+def expected_bins(logits: torch.Tensor, chosen: torch.Tensor, window: int) -> torch.Tensor:
+    """Sub-bin refinement: the probability-weighted mean bin index within ``+-window`` bins of ``chosen``.
+
+    ``logits`` ``(B, T, n_bins)`` restricted to the action range, ``chosen`` ``(B, T)`` bin indices
+    (0-based, e.g. the argmax). The window keeps the mean local: a two-peaked distribution (two
+    objects) is refined around the chosen peak, never averaged into the space between them.
+    ``window=0`` returns ``chosen`` unchanged. Returns float bin indices ``(B, T)``.
+    """
+    if window < 0:
+        raise ValueError(f"window must be >= 0 bins, got {window}")
+    if window == 0:
+        return chosen.to(torch.float64)
+    n = logits.shape[-1]
+    prob = logits.float().softmax(-1)
+    bins = torch.arange(n, device=logits.device, dtype=torch.float32)
+    near = (bins - chosen[..., None].float()).abs() <= window
+    w = prob * near
+    return ((w * bins).sum(-1) / w.sum(-1).clamp_min(1e-30)).to(torch.float64)
 
 
 def target_tokens(tokens: torch.Tensor, layout: SeqLayout) -> torch.Tensor:

@@ -15,8 +15,9 @@ import torch
 
 from policy.action_tokenizer import ActionTokenizer
 from policy.bundle import PolicyBundle
-from policy.decoding import decode_autoregressive, decode_parallel, target_tokens
+from policy.decoding import decode_autoregressive, decode_parallel, decode_parallel_logits, expected_bins, target_tokens
 
+REFINE_WINDOW_SIGMAS = 4.0  # default sub-bin refinement window, in std of the training label's Gaussian
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "mmact_small.pt"
 
 
@@ -47,6 +48,19 @@ class MMActPolicy:
     @property
     def horizon(self) -> int:
         return self.bundle.model_cfg.horizon
+
+    @property
+    def default_refine_bins(self) -> int:
+        """The sub-bin refinement window that matches how this checkpoint was trained.
+
+        ``policy.train`` fits the action bins to a Gaussian label of std ``action_label_sigma_bins``
+        (16 by default), so the predicted distribution around the right bin is that wide and its local
+        mean is a finer estimate than the argmax bin: the window is +-4 std (64 bins). A checkpoint
+        trained on one-hot labels (sigma 0) or without a recorded train config gets 0 (bin centres).
+        """
+        tc = self.bundle.info.get("train_config") or {}
+        sigma = float(tc.get("action_label_sigma_bins") or 0.0)
+        return int(round(REFINE_WINDOW_SIGMAS * sigma)) if np.isfinite(sigma) and sigma > 0 else 0
 
     @property
     def device(self) -> torch.device:
@@ -91,18 +105,35 @@ class MMActPolicy:
     # ---- the three tasks -----------------------------------------------------
     @torch.no_grad()
     def predict_chunk(self, images: np.ndarray, instruction: str, q_rad: np.ndarray, action_steps: int = 1,
-                      known_actions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      known_actions: np.ndarray | None = None, refine_bins: int | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """mm2a: frames ``(V, H, W, 3)`` uint8 + instruction + joint angles (rad) -> action chunk.
 
-        Returns ``(tokens (H, 7) int64 in the shared vocabulary, actions (H, 7) float64 bin centres)``.
+        Returns ``(tokens (H, 7) int64 in the shared vocabulary, actions (H, 7) float64)``; the tokens
+        are the greedy (argmax) ones whatever ``refine_bins`` is.
         ``action_steps=1`` fills the chunk in one forward pass; ``k > 1`` re-masks the least
         confident tokens on a cosine schedule. ``known_actions`` (H, 7) int64, -1 = unknown: the
-        known tokens are kept and the rest inpainted.
+        known tokens are kept and the rest inpainted. ``refine_bins=0`` returns bin centres of the
+        greedy tokens; ``w > 0`` returns, for each predicted token, the probability-weighted mean
+        bin within ``+-w`` bins of it (same forward pass, no extra cost beyond a softmax); None
+        (default) = ``default_refine_bins``, the window matched to the checkpoint's training labels.
+        Known tokens stay at their bin centres either way.
         """
+        if refine_bins is None:
+            refine_bins = self.default_refine_bins
+        if refine_bins < 0:
+            raise ValueError(f"refine_bins must be >= 0, got {refine_bins}")
         toks, lay = self.mm2a_batch(images, instruction, q_rad, known_actions)
-        out = target_tokens(decode_parallel(self.model, toks, lay, action_steps), lay)[0].cpu().numpy()
-        tokens = out.reshape(self.horizon, -1).astype(np.int64)
-        return tokens, self.action_tokenizer.decode(tokens)
+        filled, logits = decode_parallel_logits(self.model, toks, lay, action_steps)
+        out = target_tokens(filled, lay)[0]
+        tokens = out.cpu().numpy().reshape(self.horizon, -1).astype(np.int64)
+        if refine_bins == 0 or logits is None:
+            return tokens, self.action_tokenizer.decode(tokens)
+        lo, _ = self.model.vocab.range_of("action")
+        frac = expected_bins(logits[0], out - lo, refine_bins).cpu().numpy()
+        unknown = (toks[0, torch.as_tensor(lay.target_idx, device=toks.device)] == self.model.vocab.mask_id).cpu().numpy()
+        frac = np.where(unknown, frac, (out - lo).cpu().numpy()).reshape(self.horizon, -1)
+        return tokens, self.action_tokenizer.decode_fractional(frac)
 
     @torch.no_grad()
     def predict_chunk_autoregressive(self, images: np.ndarray, instruction: str, q_rad: np.ndarray

@@ -39,6 +39,10 @@ class _OneLineErrorParser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def _refine_bins(text: str):
+    return "auto" if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
+
+
 def _number(kind, name: str, low: float | None = None, low_inclusive: bool = True, high: float | None = None):
     def parse(text: str):
         try:
@@ -88,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="policy checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
     src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=1,
                      help="policy: decoding passes per chunk (1 = the whole chunk in one forward pass)")
+    src.add_argument("--refine-bins", type=_refine_bins, default="auto",
+                     help="policy: 0 = each action token's bin centre; W > 0 = the probability-weighted mean bin "
+                          "within +-W bins of the greedy token (sub-bin detokenizing from the same forward pass); "
+                          "auto = the window matched to the checkpoint's Gaussian training labels (4 std: 64)")
     g = p.add_argument_group("execution")
     g.add_argument("--mode", nargs="+", choices=MODES, default=["open_loop", "hybrid"],
                    help="open_loop: dequantized waypoints interpolated and tracked by the QP, nothing else; "
@@ -163,7 +171,8 @@ def make_source(args: argparse.Namespace):
     if args.source == "policy":
         from mmact_ctrl.policy_source import PolicyChunkSource
 
-        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps)
+        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps,
+                                 refine_bins=None if args.refine_bins == "auto" else args.refine_bins)
     return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s)
 
 
@@ -207,7 +216,8 @@ def run(args: argparse.Namespace) -> dict:
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
-                   "target_spec": dataclasses.asdict(world.target)},
+                   "target_spec": dataclasses.asdict(world.target),
+                   "refine_bins_used": getattr(source, "refine_bins", None)},
         "summary": runs[last]["summary"],
         "episodes": runs[last]["episodes"],
         "runs": runs,
@@ -231,6 +241,10 @@ def main(argv: list[str] | None = None) -> int:
     latency = args.latency_ms if args.latency_ms == "measured" else f"{args.latency_ms:g}"
     run_desc = (f"{args.source} source, {args.objects} object(s), {target_desc}, replan {args.replan_hz:g} Hz, "
                 f"latency {latency} ms, {args.bins or 'no'} bins")  # one description: table header and plot title
+    if args.source == "policy":
+        w = payload["config"]["refine_bins_used"]
+        passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"
+        run_desc += f" (policy: {passes}, {'refine +-' + str(w) + ' bins' if w else 'bin centres'})"
     print(f"\n{run_desc}, {args.episodes} episodes x {args.duration_s:g} s per mode "
           f"({time.perf_counter() - t0:.1f} s wall)\n")
     print(format_table({m: r["summary"] for m, r in payload["runs"].items()}))

@@ -23,6 +23,7 @@ BAD = [
     (["--instruction", "reach the green ball"], "instruction"),
     (["--latency-ms", "soon"], "--latency-ms"),
     (["--source", "policy", "--checkpoint", "/nonexistent/ckpt.pt"], "checkpoint"),
+    (["--refine-bins", "-3"], "--refine-bins"),
 ]
 
 

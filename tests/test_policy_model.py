@@ -10,7 +10,8 @@ import torch
 from policy.bundle import PolicyBundle, untrained_bundle
 from policy.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from policy.config import ImageTokenizerConfig, ModelConfig
-from policy.decoding import cosine_masked_count, decode_autoregressive, decode_parallel, target_tokens
+from policy.decoding import (cosine_masked_count, decode_autoregressive, decode_parallel, decode_parallel_logits,
+                             expected_bins, target_tokens)
 from policy.inference import DEFAULT_CHECKPOINT, MMActPolicy
 from policy.train import TASK_WEIGHT, task_loss
 
@@ -96,6 +97,60 @@ def test_decoding_emits_only_the_target_modality(bundle, task, steps):
 def test_cosine_schedule_ends_unmasked():
     assert [cosine_masked_count(112, s, 4) for s in range(1, 5)] == [103, 79, 42, 0]
     assert cosine_masked_count(10, 1, 1) == 0
+
+
+def test_expected_bins_is_the_local_mean_around_the_chosen_peak():
+    n = 2048
+    bins = torch.arange(n, dtype=torch.float32)
+    # a Gaussian at 100.3 bins plus a second, weaker peak at 900: the local mean recovers 100.3, not the global mean
+    logp = torch.logaddexp(-0.5 * ((bins - 100.3) / 8) ** 2, -0.5 * ((bins - 900) / 8) ** 2 + np.log(0.6))
+    logits = logp[None, None]  # (1, 1, n)
+    chosen = logits.argmax(-1)
+    assert int(chosen) == 100
+    assert float(expected_bins(logits, chosen, 64)) == pytest.approx(100.3, abs=0.05)
+    full = float(expected_bins(logits, chosen, n))
+    assert 350 < full < 450  # the unwindowed mean lands between the two peaks: why the window exists
+    assert float(expected_bins(logits, chosen, 0)) == 100.0
+    with pytest.raises(ValueError, match="window"):
+        expected_bins(logits, chosen, -1)
+
+
+def test_decode_fractional_matches_decode_on_integers_and_checks_range():
+    from policy.action_tokenizer import ActionTokenizer
+
+    tok = ActionTokenizer(bins=256, token_offset=10)
+    idx = np.random.default_rng(1).integers(0, 256, size=(5, 7))
+    assert np.allclose(tok.decode_fractional(idx.astype(float)), tok.decode(idx + 10))
+    half = tok.decode_fractional(np.full((1, 7), 3.5))
+    assert np.allclose(half, (tok.decode(np.full((1, 7), 13)) + tok.decode(np.full((1, 7), 14))) / 2)
+    for bad in (np.full((1, 7), -0.5), np.full((1, 7), 255.5), np.full((1, 7), np.nan)):
+        with pytest.raises(ValueError, match="bin indices"):
+            tok.decode_fractional(bad)
+
+
+def test_predict_chunk_refine_bins(bundle):
+    pol = MMActPolicy(bundle)
+    assert pol.default_refine_bins == 0  # no recorded training labels: bin centres by default
+    imgs = np.random.default_rng(0).integers(0, 256, size=(1, 32, 32, 3), dtype=np.uint8)
+    q = np.zeros(7)
+    t0, a0 = pol.predict_chunk(imgs, "reach the red ball", q)
+    assert np.allclose(a0, pol.action_tokenizer.decode(t0))
+    tw, aw = pol.predict_chunk(imgs, "reach the red ball", q, refine_bins=16)
+    assert np.array_equal(t0, tw)  # the tokens are the greedy ones either way
+    # refined values stay within the window (+- 16 bins) of the greedy bin centre, and differ from it
+    assert np.all(np.abs(aw - a0) <= 16 * pol.action_tokenizer.bin_width + 1e-12)
+    assert not np.allclose(aw, a0)
+    toks, lay = pol.mm2a_batch(imgs, "reach the red ball", q)
+    filled, logits = decode_parallel_logits(bundle.model, toks, lay)
+    lo, _ = bundle.model.vocab.range_of("action")
+    assert torch.equal(filled, decode_parallel(bundle.model, toks, lay))
+    assert torch.equal(logits.argmax(-1) + lo, target_tokens(filled, lay))
+    known = np.full((16, 7), -1, np.int64)
+    known[:4] = lo + 7
+    tk, ak = pol.predict_chunk(imgs, "reach the red ball", q, known_actions=known, refine_bins=16)
+    assert np.allclose(ak[:4], pol.action_tokenizer.decode(tk[:4]))  # known tokens stay at their bin centres
+    with pytest.raises(ValueError, match="refine_bins"):
+        pol.predict_chunk(imgs, "x", q, refine_bins=-1)
 
 
 def test_predict_chunk_shapes_and_inpainting(bundle):
@@ -193,6 +248,7 @@ def test_shipped_checkpoint_loads_and_predicts():
         pytest.skip(f"{DEFAULT_CHECKPOINT} not shipped yet")
     assert Path(DEFAULT_CHECKPOINT).stat().st_size <= 20e6
     pol = MMActPolicy.load(DEFAULT_CHECKPOINT)
+    assert pol.default_refine_bins == 64  # trained on Gaussian labels of std 16 bins: +-4 std
     s = pol.bundle.image_cfg.image_size_px
     imgs = np.full((1, s, s, 3), 128, np.uint8)
     tokens, actions = pol.predict_chunk(imgs, "reach the red ball", np.array([0, -0.3, 0, -2.2, 0, 1.9, 0.8]))
