@@ -15,7 +15,13 @@ import torch
 
 from policy.action_tokenizer import ActionTokenizer
 from policy.bundle import PolicyBundle
-from policy.decoding import decode_autoregressive, decode_parallel, decode_parallel_logits, expected_bins, target_tokens
+from policy.decoding import (
+    decode_autoregressive,
+    decode_parallel,
+    decode_parallel_logits,
+    expected_bins,
+    target_tokens,
+)
 
 REFINE_WINDOW_SIGMAS = 4.0  # default sub-bin refinement window, in std of the training label's Gaussian
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "mmact_small.pt"
@@ -60,7 +66,7 @@ class MMActPolicy:
         """
         tc = self.bundle.info.get("train_config") or {}
         sigma = float(tc.get("action_label_sigma_bins") or 0.0)
-        return int(round(REFINE_WINDOW_SIGMAS * sigma)) if np.isfinite(sigma) and sigma > 0 else 0
+        return round(REFINE_WINDOW_SIGMAS * sigma) if np.isfinite(sigma) and sigma > 0 else 0
 
     @property
     def device(self) -> torch.device:

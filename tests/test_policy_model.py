@@ -4,14 +4,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import torch
 
 from policy.bundle import PolicyBundle, untrained_bundle
 from policy.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from policy.config import ImageTokenizerConfig, ModelConfig
-from policy.decoding import (cosine_masked_count, decode_autoregressive, decode_parallel, decode_parallel_logits,
-                             expected_bins, target_tokens)
+from policy.decoding import (
+    cosine_masked_count,
+    decode_autoregressive,
+    decode_parallel,
+    decode_parallel_logits,
+    expected_bins,
+    target_tokens,
+)
 from policy.inference import DEFAULT_CHECKPOINT, MMActPolicy
 from policy.train import TASK_WEIGHT, task_loss
 
