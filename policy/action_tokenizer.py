@@ -97,7 +97,7 @@ class ActionTokenizer:
             raise ValueError(
                 f"token {first} is outside the action range [{self.token_offset}, {self.token_offset + self.bins})"
             )
-        return self.low + (idx + 0.5) * self.bin_width
+        return self.decode_fractional(idx)
 
     def decode_fractional(self, bin_index: np.ndarray) -> np.ndarray:
         """Fractional bin indices ``(..., 7)`` (0-based, e.g. from ``policy.decoding.expected_bins``) ->

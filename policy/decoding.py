@@ -39,8 +39,10 @@ def decode_parallel(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout, 
 @torch.no_grad()
 def decode_parallel_logits(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout,
                            steps: int = 1) -> tuple[torch.Tensor, torch.Tensor | None]:
-    """``decode_parallel`` that also returns the last pass's target logits ``(B, T, range)``
-    (None when nothing was masked, so no pass ran)."""
+    """``decode_parallel`` that also returns, per target position, the logits ``(B, T, range)`` of the
+    pass that filled it (positions known from the start: the first pass's); None when nothing was
+    masked, so no pass ran. With ``steps > 1`` a token committed in an early pass is an input of the
+    later passes, so their logits at its position say nothing about it: hence per position."""
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
     mask_id = model.vocab.mask_id
@@ -50,12 +52,13 @@ def decode_parallel_logits(model: MMActModel, tokens: torch.Tensor, layout: SeqL
     tgt = out[:, idx]
     unknown0 = tgt == mask_id  # (B, T)
     n0 = unknown0.sum(1)  # per sample
-    logits = None
+    fill_logits = None
     for s in range(1, steps + 1):
         unknown = out[:, idx] == mask_id
         if not bool(unknown.any()):
             break
         logits = model.target_logits(out, layout)
+        fill_logits = logits if fill_logits is None else torch.where(unknown[..., None], logits, fill_logits)
         cur = out[:, idx]
         if s == steps:  # last (or only) pass: no confidences needed
             out[:, idx] = torch.where(unknown, logits.argmax(-1) + lo, cur)
@@ -71,7 +74,7 @@ def decode_parallel_logits(model: MMActModel, tokens: torch.Tensor, layout: SeqL
             remask = unknown & (rank < keep_masked[:, None])
             filled = torch.where(remask, torch.full_like(filled, mask_id), filled)
         out[:, idx] = filled
-    return out, logits
+    return out, fill_logits
 
 
 @torch.no_grad()

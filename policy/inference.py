@@ -136,10 +136,10 @@ class MMActPolicy:
         if refine_bins == 0 or logits is None:
             return tokens, self.action_tokenizer.decode(tokens)
         lo, _ = self.model.vocab.range_of("action")
-        frac = expected_bins(logits[0], out - lo, refine_bins).cpu().numpy()
-        unknown = (toks[0, torch.as_tensor(lay.target_idx, device=toks.device)] == self.model.vocab.mask_id).cpu().numpy()
-        frac = np.where(unknown, frac, (out - lo).cpu().numpy()).reshape(self.horizon, -1)
-        return tokens, self.action_tokenizer.decode_fractional(frac)
+        bins = (tokens - lo).astype(np.float64)
+        refined = expected_bins(logits[0], out - lo, refine_bins).cpu().numpy().reshape(bins.shape)
+        known = np.asarray(known_actions) >= 0 if known_actions is not None else np.zeros(bins.shape, bool)
+        return tokens, self.action_tokenizer.decode_fractional(np.where(known, bins, refined))
 
     @torch.no_grad()
     def predict_chunk_autoregressive(self, images: np.ndarray, instruction: str, q_rad: np.ndarray

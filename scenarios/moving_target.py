@@ -39,8 +39,9 @@ class _OneLineErrorParser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def _refine_bins(text: str):
-    return "auto" if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
+def _refine_bins(text: str) -> int | None:
+    """``auto`` -> None (the checkpoint's matched window), else an integer >= 0."""
+    return None if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
 
 
 def _number(kind, name: str, low: float | None = None, low_inclusive: bool = True, high: float | None = None):
@@ -171,8 +172,7 @@ def make_source(args: argparse.Namespace):
     if args.source == "policy":
         from mmact_ctrl.policy_source import PolicyChunkSource
 
-        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps,
-                                 refine_bins=None if args.refine_bins == "auto" else args.refine_bins)
+        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps, refine_bins=args.refine_bins)
     return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s)
 
 

@@ -150,6 +150,9 @@ def test_predict_chunk_refine_bins(bundle):
     lo, _ = bundle.model.vocab.range_of("action")
     assert torch.equal(filled, decode_parallel(bundle.model, toks, lay))
     assert torch.equal(logits.argmax(-1) + lo, target_tokens(filled, lay))
+    # with re-masking, each position's logits are those of the pass that filled it: their argmax is its token
+    filled4, logits4 = decode_parallel_logits(bundle.model, toks, lay, steps=4)
+    assert torch.equal(logits4.argmax(-1) + lo, target_tokens(filled4, lay))
     known = np.full((16, 7), -1, np.int64)
     known[:4] = lo + 7
     tk, ak = pol.predict_chunk(imgs, "reach the red ball", q, known_actions=known, refine_bins=16)
