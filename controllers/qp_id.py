@@ -3,8 +3,18 @@
 Decision variable: joint accelerations ``ddq`` (7). Torques follow as ``tau = M ddq + h``.
 
     minimize    sum_tasks || J_i ddq + dJv_i - a_des_i ||^2_{W_i} + w_post ||ddq - ddq_post||^2 + reg ||ddq||^2
-    subject to  -tau_max - h  <=  M ddq  <=  tau_max - h          (effort, with a margin)
-                ddq_lb        <=   ddq   <=  ddq_ub               (acceleration, velocity, position viability)
+    subject to  tau_lo - h    <=  M ddq  <=  tau_hi - h           (effort and torque RATE)
+                ddq_lb        <=   ddq   <=  ddq_ub               (acceleration, jerk, velocity, position viability)
+
+    tau_lo, tau_hi = max(-tau_max, tau_last - dtau), min(tau_max, tau_last + dtau)
+
+The torque-rate rows are the Panda's one necessary condition in torque control beyond finite values:
+|tau_k - tau_(k-1)| < 1000 N m/s, measured against the last torque the robot *received* (``tau_last``;
+after a missed tick that is the torque the robot held). It is a constraint of this QP in every mode:
+it is the robot's limit, not a feature of one method. ``dtau = rate_margin * 1000 N m/s * dt``. The
+acceleration box is intersected with ``ddq_last +- jerk_margin * j_max * dt``, ``ddq_last`` being the
+acceleration the last command asked for, so the commanded acceleration's jerk (backward Euler) stays
+inside the Panda's dddq limits; the box itself uses ``a_margin * ddq_max``.
 
 Tasks (mink-style: each has a gain and a cost): TCP position and orientation (PD on the
 reference, with velocity and acceleration feed-forward) and a joint posture task.
@@ -17,14 +27,23 @@ The values are assembled by one compiled kernel (``controllers.tick_kernels.asse
 straight into the CSC value arrays; ``problem`` is the same QP in dense numpy form (the
 reference the kernel is tested against, and what cross-checks with other solvers use).
 If OSQP returns neither "solved" nor "solved inaccurate" (the latter is counted in
-``inaccurate``), or a non-finite solution, the controller falls back to gravity compensation
-with joint damping (within the effort limits) and counts the failure in ``failures``.
+``inaccurate``), or a non-finite solution, the same QP goes to DAQP (dual active set; counted in
+``rescues`` when it solves it): ADMM can stall for hundreds of iterations when the torque-rate rows
+and several joint bounds are active together, where an active-set method is exact in a few
+iterations. Only if both fail does the controller fall back (:meth:`TaskSpaceQP.fallback`)
+and counts the failure in ``failures``: the torque ramps toward gravity compensation with joint
+damping, the acceleration that asks for limited to the acceleration box and to the jerk limit from
+the last commanded acceleration, and the torque step to the same rate limit. A solved torque that
+the solver's tolerance left outside the rate limit is clamped onto it (counted in ``rate_clamps``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ctypes import c_int
+
+import daqp
 import numpy as np
 import osqp
 import scipy.sparse as sp
@@ -33,7 +52,7 @@ from controllers.limits import JointAccelerationBounds
 from controllers.robot_description import JointLimits
 from controllers.robot_model import RobotTerms
 from controllers.rotations import orientation_error
-from controllers.tick_kernels import assemble_qp, qp_params, torque
+from controllers.tick_kernels import assemble_qp, clamp_rate, jerk_box, qp_params, rate_box, torque
 
 
 @dataclass(frozen=True)
@@ -53,6 +72,10 @@ class QPConfig:
         fallback_kd: joint damping of the fallback torque, N*m*s/rad.
         eps: OSQP absolute and relative tolerance.
         max_iter: OSQP iteration cap.
+        dtau_max_nm_s: the robot's torque-rate limit, N*m/s (Panda: 1000).
+        rate_margin: fraction of the torque-rate limit the QP may use per step (0 < rate_margin <= 1).
+        a_margin: fraction of the joint acceleration limits the QP may use.
+        jerk_margin: fraction of the joint jerk limits the commanded acceleration may use.
     """
 
     kp_pos: float = 400.0
@@ -73,6 +96,10 @@ class QPConfig:
     fallback_kd: float = 5.0
     eps: float = 1e-5
     max_iter: int = 400
+    dtau_max_nm_s: float = 1000.0
+    rate_margin: float = 0.95
+    a_margin: float = 0.97
+    jerk_margin: float = 0.9
 
     def __post_init__(self) -> None:
         for name in ("kp_pos", "kd_pos", "kp_ori", "kd_ori", "kp_post", "kd_post", "w_pos", "w_ori", "w_post", "w_reg"):
@@ -84,6 +111,11 @@ class QPConfig:
             raise ValueError(f"QPConfig.v_margin must be in (0, 1], got {self.v_margin}")
         if not self.dt_s > 0:
             raise ValueError(f"QPConfig.dt_s must be > 0, got {self.dt_s}")
+        if not self.dtau_max_nm_s > 0:
+            raise ValueError(f"QPConfig.dtau_max_nm_s must be > 0, got {self.dtau_max_nm_s}")
+        for name in ("rate_margin", "a_margin", "jerk_margin"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"QPConfig.{name} must be in (0, 1], got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -110,9 +142,15 @@ class TaskSpaceQP:
 
     def __init__(self, config: QPConfig = QPConfig(), limits: JointLimits = JointLimits()) -> None:
         self.config = config
-        self._tau_max = limits.arrays()["tau_max_nm"]
+        lim = limits.arrays()
+        self._tau_max = lim["tau_max_nm"]
         self._tau_lim = self._tau_max * config.tau_margin
-        self._bounds = JointAccelerationBounds(limits, config.dt_s, config.brake_horizon_s, config.q_margin_rad, config.v_margin)
+        self._bounds = JointAccelerationBounds(limits, config.dt_s, config.brake_horizon_s, config.q_margin_rad, config.v_margin,
+                                               config.a_margin)
+        #: the largest torque step per control period the QP plans (margined) and the hard guard (just inside the limit)
+        self.dtau_step_nm = config.rate_margin * config.dtau_max_nm_s * config.dt_s
+        self.dtau_hard_nm = (1.0 - 1e-6) * config.dtau_max_nm_s * config.dt_s
+        self._ddq_step = config.jerk_margin * lim["j_max_rad_s3"] * config.dt_s
         self.n = 7
         n = self.n
         self._w6 = np.array([config.w_pos] * 3 + [config.w_ori] * 3)
@@ -130,7 +168,7 @@ class TaskSpaceQP:
         b = self._bounds
         self._params = qp_params(self._kp6, self._kd6, self._w6, config.kp_post, config.kd_post, config.w_post,
                                  config.w_post + config.w_reg, b.q_hi, b.q_lo, b.v_max, b.a_max, self._tau_lim,
-                                 config.dt_s, config.brake_horizon_s)
+                                 config.dt_s, config.brake_horizon_s, self.dtau_step_nm, self._ddq_step)
         self._P_x = np.empty(len(self._p_idx))
         self._g = np.empty(n)
         self._A_x = np.empty(len(self._a_idx))
@@ -155,13 +193,43 @@ class TaskSpaceQP:
         # The low-level solver object: the high-level wrapper's update()/solve() spend ~50 us per tick
         # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
         self._ext = self._solver._solver
+        self._P_dense = np.zeros((n, n))
+        self._A_dense = np.vstack([np.zeros((n, n)), np.eye(n)])
+        self._sense = np.zeros(2 * n, dtype=c_int)
         self._ok_status = (int(osqp.SolverStatus.OSQP_SOLVED), int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE))
         self._inaccurate_status = int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
         self.inaccurate = 0
         self.failures = 0
         self.solves = 0
+        self.rate_clamps = 0
+        self.rescues = 0
         self.last_ok = True
         self.last_ddq = np.zeros(n)
+        #: the last torque the robot received, N*m (None until :meth:`reset` or the first command: then the
+        #: bias torque h of that first state, i.e. the robot holding itself as it does before a controller starts)
+        self.tau_last: np.ndarray | None = None
+
+    def reset(self, tau_start_nm: np.ndarray, ddq_start_rad_s2: np.ndarray | None = None) -> None:
+        """Start of a motion: the torque the robot applies now (the first command's rate is measured against
+        it) and the acceleration that torque commands (default rest); clears the counters."""
+        tau = np.asarray(tau_start_nm, dtype=np.float64)
+        if tau.shape != (self.n,) or not np.all(np.isfinite(tau)):
+            raise ValueError(f"tau_start_nm must be {self.n} finite torques, got {tau_start_nm!r}")
+        self.tau_last = tau.copy()
+        self.last_ddq = np.zeros(self.n) if ddq_start_rad_s2 is None else np.asarray(ddq_start_rad_s2, dtype=np.float64).copy()
+        self.failures = self.solves = self.inaccurate = self.rate_clamps = self.rescues = 0
+        self.last_ok = True
+
+    def hold(self, terms: RobotTerms, tau_held_nm: np.ndarray) -> np.ndarray:
+        """A control tick whose command did not reach the robot: the robot re-applies ``tau_held_nm``. Records
+        it as the last torque and returns (and records) the joint acceleration it commands in this state."""
+        self.tau_last = np.asarray(tau_held_nm, dtype=np.float64).copy()
+        self.last_ddq = commanded_accel(terms, self.tau_last, self.last_ddq)
+        return self.last_ddq
+
+    def _ensure_started(self, terms: RobotTerms) -> None:
+        if self.tau_last is None:
+            self.tau_last = np.array(terms.h, dtype=np.float64)
 
     def problem(
         self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference
@@ -178,18 +246,25 @@ class TaskSpaceQP:
         P = J.T @ WJ + self._p_diag
         g = (terms.dJv - a_des) @ WJ - c.w_post * ddq_post
         n = self.n
-        self._lower[n:], self._upper[n:] = self._bounds(q_rad, dq_rad_s)
-        np.subtract(-self._tau_lim, terms.h, out=self._lower[:n])
-        np.subtract(self._tau_lim, terms.h, out=self._upper[:n])
+        self._ensure_started(terms)
+        j_eff = np.minimum(self._ddq_step, 0.5 * self.dtau_step_nm / np.diag(terms.M)) / c.dt_s
+        lb, ub = self._bounds(q_rad, dq_rad_s, j_eff)
+        jerk_box(self.last_ddq, self._ddq_step, lb, ub)
+        self._lower[n:], self._upper[n:] = lb, ub
+        rate_box(self.tau_last, self._tau_lim, self.dtau_step_nm, self._lower[:n], self._upper[:n])
+        self._lower[:n] -= terms.h
+        self._upper[:n] -= terms.h
         self._a_full[:n] = terms.M
         return P, g, self._a_full, self._lower, self._upper
 
     def solve(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> np.ndarray:
-        """Torques (7,) N*m that track ``ref`` within limits; a safe fallback (counted) if OSQP fails."""
+        """Torques (7,) N*m that track ``ref`` within limits, the torque rate included; a safe fallback
+        (counted) if OSQP fails. The result becomes ``tau_last`` (the caller sends it to the robot)."""
         self.solves += 1
+        self._ensure_started(terms)
         assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
                     ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
-                    self._params, self._P_x, self._g, self._A_x, self._l, self._u)
+                    self.tau_last, self.last_ddq, self._params, self._P_x, self._g, self._A_x, self._l, self._u)
         ext = self._ext
         ext.update_data_vec(q=self._g, l=self._l, u=self._u)
         ext.update_data_mat(P_x=self._P_x, P_i=None, A_x=self._A_x, A_i=None)
@@ -197,16 +272,73 @@ class TaskSpaceQP:
         status = int(ext.info.status_val)
         ddq = np.array(ext.solution.x)
         tau = np.empty(self.n)
-        if status in self._ok_status and torque(terms.M, terms.h, ddq, tau):  # tau = M ddq + h, all finite
-            self.inaccurate += status == self._inaccurate_status
+        ok = status in self._ok_status and torque(terms.M, terms.h, ddq, tau)  # tau = M ddq + h, all finite
+        if not ok:  # ADMM stalls when many limits are active at once: the exact active-set solver takes over
+            ddq = self._rescue()
+            ok = ddq is not None and torque(terms.M, terms.h, ddq, tau)
+            self.rescues += ok
+        elif status == self._inaccurate_status:
+            self.inaccurate += 1
+        if ok:
+            if clamp_rate(tau, self.tau_last, self.dtau_hard_nm) > 1e-9:  # the solver's tolerance, rare
+                self.rate_clamps += 1
+                ddq = commanded_accel(terms, tau, ddq)
             self.last_ok = True
             self.last_ddq = ddq
-            return tau  # not clipped: the caller measures limit violations
+            self.tau_last = tau
+            return tau  # not clipped to the effort limits: the safety monitor checks what is sent
+        return self.fallback(terms, dq_rad_s)
+
+    def _rescue(self) -> np.ndarray | None:
+        """The same QP (the values just assembled) solved by DAQP, a dual active-set solver: exact where OSQP's
+        ADMM ran out of iterations (typically with the torque-rate rows and several joint bounds active at once;
+        ~16 us). Returns ddq, or None when DAQP finds no solution either."""
+        n = self.n
+        P = self._P_dense
+        P.T.flat[self._p_idx] = self._P_x  # upper triangle, column-major
+        P = np.triu(P) + np.triu(P, 1).T
+        self._A_dense[:n] = self._A_x.reshape(n, n + 1)[:, :n].T
+        try:
+            x, _, flag, _ = daqp.solve(P, self._g, self._A_dense, self._u, self._l, self._sense)
+        except Exception:  # noqa: BLE001 - a solver error means: fall back
+            return None
+        x = np.asarray(x, dtype=np.float64)
+        return x if flag in (1, 2) and x.shape == (n,) and np.all(np.isfinite(x)) else None
+
+    def fallback(self, terms: RobotTerms, dq_rad_s: np.ndarray) -> np.ndarray:
+        """The torque of a tick the QP could not solve (counted in ``failures``): see :meth:`fallback_torque`."""
         self.last_ok = False
         self.failures += 1
-        return self.fallback_torque(terms, dq_rad_s)
+        self._ensure_started(terms)
+        tau = self.fallback_torque(terms, dq_rad_s)
+        self.last_ddq = commanded_accel(terms, tau, self.last_ddq)
+        self.tau_last = tau
+        return tau
 
     def fallback_torque(self, terms: RobotTerms, dq_rad_s: np.ndarray) -> np.ndarray:
-        """Gravity/Coriolis compensation with joint damping, within the effort limits."""
-        tau = terms.h - self.config.fallback_kd * dq_rad_s
-        return np.clip(tau, -self._tau_lim, self._tau_lim)
+        """Ramp toward gravity/Coriolis compensation with joint damping (``h - fallback_kd dq``), within the
+        robot's conditions: the acceleration it asks for is kept inside the acceleration box and within the jerk
+        limit of the last commanded acceleration, the torque within the effort limits and the rate limit of the
+        last torque. With non-finite model terms the last torque is held (zero rate)."""
+        self._ensure_started(terms)
+        tau_last = self.tau_last
+        M, h = terms.M, terms.h
+        if not (np.all(np.isfinite(M)) and np.all(np.isfinite(h)) and np.all(np.isfinite(dq_rad_s))):
+            return tau_last.copy()
+        a_box = self._bounds.a_max
+        ddq_goal = np.clip(np.linalg.solve(M, -self.config.fallback_kd * dq_rad_s), -a_box, a_box)
+        ddq = self.last_ddq + np.clip(ddq_goal - self.last_ddq, -self._ddq_step, self._ddq_step)
+        tau = M @ ddq + h
+        lo, hi = np.empty(self.n), np.empty(self.n)
+        rate_box(tau_last, self._tau_lim, self.dtau_step_nm, lo, hi)
+        return np.clip(tau, lo, hi)
+
+
+def commanded_accel(terms: RobotTerms, tau_nm: np.ndarray, default: np.ndarray) -> np.ndarray:
+    """The joint acceleration (7,) rad/s^2 that torque ``tau_nm`` commands in the state of ``terms``:
+    ``M^-1 (tau - h)`` (``default`` when the terms are not finite or M is singular)."""
+    try:
+        ddq = np.linalg.solve(terms.M, np.asarray(tau_nm, dtype=np.float64) - terms.h)
+    except np.linalg.LinAlgError:
+        return np.array(default, dtype=np.float64)
+    return ddq if np.all(np.isfinite(ddq)) else np.array(default, dtype=np.float64)

@@ -69,6 +69,7 @@ class PandaModel:
             raise RuntimeError(f"unexpected joints in the Panda model: {names}")
         self.model.armature = np.asarray(config.armature_kgm2, dtype=np.float64)
         self.data = self.model.createData()
+        self._kin_data = self.model.createData()  # for kinematics at other states: never overwrites ``terms``
         self.frame_id = self.model.getFrameId(config.frame)
         if self.frame_id >= self.model.nframes:
             raise ValueError(f"frame {config.frame!r} not in the Panda model")
@@ -102,6 +103,15 @@ class PandaModel:
             rot=oMf.rotation,
             vel=pin.getFrameVelocity(m, d, fid, frame).vector,
         )
+
+    def kinematics(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """TCP position (3,) m, rotation (3,3) and Jacobian (6,7) LOCAL_WORLD_ALIGNED at ``q`` (copies), computed
+        on a second data buffer so the arrays of the last :meth:`terms` stay valid."""
+        m, d, fid = self.model, self._kin_data, self.frame_id
+        pin.computeJointJacobians(m, d, q_rad)
+        oMf = pin.updateFramePlacement(m, d, fid)
+        J = pin.getFrameJacobian(m, d, fid, pin.LOCAL_WORLD_ALIGNED)
+        return oMf.translation.copy(), oMf.rotation.copy(), np.array(J)
 
     def fk(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """TCP (position m, rotation) at ``q``."""

@@ -1,9 +1,15 @@
 """Kalman filter on the target position (filterpy), from noisy, sometimes missing measurements.
 
-Constant-velocity (default) or constant-acceleration model per axis. A measurement whose
-innovation is far outside the filter's belief (squared Mahalanobis distance above
-``reset_gate`` for ``reset_after`` measurements in a row) means the target jumped: the
-filter re-initialises on it instead of slowly gliding over.
+Constant-velocity (default) or constant-acceleration model per axis.
+
+Every measurement passes a gate before it may touch the filter; what is gated is counted, never fused:
+- non-finite (NaN, inf) or wrongly shaped: ``gated_nonfinite``;
+- frozen: bit-for-bit the value of the previous measurement (a real sensor's noise never repeats; a
+  stalled driver re-sends its last value): ``gated_frozen``;
+- outlier: innovation far outside the filter's belief (squared Mahalanobis distance above ``reset_gate``):
+  ``gated_outlier``. If ``reset_after`` such measurements in a row *agree with each other* (each within
+  ``jump_agree_m`` of the previous one) the target really jumped, and the filter re-initialises on the
+  last of them instead of slowly gliding over; isolated or scattered outliers never move it.
 """
 
 from __future__ import annotations
@@ -24,7 +30,8 @@ class FilterConfig:
     accel_noise_m_s2: process noise: standard deviation of the unmodelled acceleration (cv) or jerk (ca).
     init_vel_std_m_s: initial velocity standard deviation, m/s.
     reset_gate: squared Mahalanobis distance of an innovation treated as a jump.
-    reset_after: consecutive gated measurements before re-initialising.
+    reset_after: consecutive gated measurements, each agreeing with the previous, before re-initialising.
+    jump_agree_m: how close consecutive gated measurements must be to count as one new position (a jump), m.
     """
 
     dt_s: float = 0.01
@@ -34,11 +41,12 @@ class FilterConfig:
     init_vel_std_m_s: float = 0.5
     reset_gate: float = 60.0
     reset_after: int = 2
+    jump_agree_m: float = 0.016
 
     def __post_init__(self) -> None:
         if self.model not in ("cv", "ca"):
             raise ValueError(f"FilterConfig.model must be 'cv' or 'ca', got {self.model!r}")
-        for name in ("dt_s", "meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "reset_gate"):
+        for name in ("dt_s", "meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "reset_gate", "jump_agree_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"FilterConfig.{name} must be > 0, got {getattr(self, name)}")
         if self.reset_after < 1:
@@ -68,7 +76,18 @@ class TargetFilter:
         self.t_s = 0.0
         self.resets = 0
         self.missed = 0
+        self.fused = 0
+        self.gated_nonfinite = 0
+        self.gated_frozen = 0
+        self.gated_outlier = 0
         self._gated = 0
+        self._last_z: np.ndarray | None = None
+        self._last_gated: np.ndarray | None = None
+
+    @property
+    def gated(self) -> int:
+        """Measurements rejected by the gate (non-finite, frozen, outlier)."""
+        return self.gated_nonfinite + self.gated_frozen + self.gated_outlier
 
     def _init_on(self, t_s: float, z: np.ndarray) -> None:
         kf = self.kf
@@ -80,33 +99,66 @@ class TargetFilter:
         self.t_s = t_s
         self.initialized = True
         self._gated = 0
+        self._last_gated = None
 
-    def step(self, t_s: float, z_m: np.ndarray | None) -> None:
-        """Predict to ``t_s`` (one perception period after the last step) and fuse ``z_m`` if present."""
+    def _screen(self, z_m) -> np.ndarray | None:
+        """The measurement as a (3,) array if it passes the non-finite and frozen gates, else None (counted)."""
+        try:
+            z = np.asarray(z_m, dtype=np.float64)
+        except (TypeError, ValueError):
+            self.gated_nonfinite += 1
+            return None
+        if z.shape != (3,) or not np.all(np.isfinite(z)):
+            self.gated_nonfinite += 1
+            return None
+        if self._last_z is not None and np.array_equal(z, self._last_z):
+            self.gated_frozen += 1
+            return None
+        self._last_z = z
+        return z
+
+    def step(self, t_s: float, z_m: np.ndarray | None) -> str:
+        """Predict to ``t_s`` (one perception period after the last step) and fuse ``z_m`` if it passes the gate.
+
+        Returns what happened: ``"missed"`` (None), ``"nonfinite"``/``"frozen"``/``"outlier"`` (gated, counted),
+        ``"reset"`` (a confirmed jump: re-initialised), ``"init"`` or ``"fused"``. Never raises on a bad value."""
         if z_m is not None:
-            z_m = np.asarray(z_m, dtype=np.float64)
-            if z_m.shape != (3,) or not np.all(np.isfinite(z_m)):
-                raise ValueError(f"target measurement must be 3 finite numbers, got {z_m!r}")
+            before = self.gated_nonfinite
+            z_m = self._screen(z_m)
+            if z_m is None:
+                gated = "nonfinite" if self.gated_nonfinite > before else "frozen"
+                if self.initialized:
+                    self.kf.predict()
+                    self.t_s = t_s
+                return gated
         if not self.initialized:
-            if z_m is not None:
-                self._init_on(t_s, z_m)
-            return
+            if z_m is None:
+                return "missed"
+            self._init_on(t_s, z_m)
+            return "init"
         self.kf.predict()
         self.t_s = t_s
         if z_m is None:
             self.missed += 1
-            return
+            return "missed"
         y = z_m - self.kf.H @ self.kf.x
         S = self.kf.H @ self.kf.P @ self.kf.H.T + self.kf.R
         d2 = float(y @ np.linalg.solve(S, y))
         if d2 > self.config.reset_gate:
-            self._gated += 1
+            agrees = self._last_gated is not None and np.linalg.norm(z_m - self._last_gated) <= self.config.jump_agree_m
+            self._gated = self._gated + 1 if (agrees or self._gated == 0) else 1
+            self._last_gated = z_m
             if self._gated >= self.config.reset_after:
                 self.resets += 1
                 self._init_on(t_s, z_m)
-            return
+                return "reset"
+            self.gated_outlier += 1
+            return "outlier"
         self._gated = 0
+        self._last_gated = None
         self.kf.update(z_m)
+        self.fused += 1
+        return "fused"
 
     @property
     def pos_m(self) -> np.ndarray:

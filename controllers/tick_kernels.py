@@ -21,19 +21,61 @@ from numba import njit
 _KP6, _KD6, _W6 = 0, 6, 12
 _KP_POST, _KD_POST, _W_POST, _P_DIAG = 18, 19, 20, 21
 _Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = 22, 29, 36, 43, 50
-_DT, _INV_H = 57, 58
-N_PARAMS = 59
+_DT, _INV_H, _DTAU = 57, 58, 59
+_DDQ_STEP = 60
+N_PARAMS = 67
 
 
-def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s):
-    """Pack the QP's constants into the flat vector :func:`assemble_qp` reads."""
+def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s,
+              dtau_step_nm, ddq_step_rad_s2):
+    """Pack the QP's constants into the flat vector :func:`assemble_qp` reads.
+
+    ``dtau_step_nm``: the largest torque change per control step (rate limit x dt, with margin);
+    ``ddq_step_rad_s2`` (7,): the largest change of the commanded joint acceleration per step (jerk limit x dt)."""
     p = np.empty(N_PARAMS)
     p[_KP6:_KP6 + 6], p[_KD6:_KD6 + 6], p[_W6:_W6 + 6] = kp6, kd6, w6
     p[_KP_POST], p[_KD_POST], p[_W_POST], p[_P_DIAG] = kp_post, kd_post, w_post, p_diag
     p[_Q_HI:_Q_HI + 7], p[_Q_LO:_Q_LO + 7], p[_V_MAX:_V_MAX + 7] = q_hi, q_lo, v_max
     p[_A_MAX:_A_MAX + 7], p[_TAU_LIM:_TAU_LIM + 7] = a_max, tau_lim
-    p[_DT], p[_INV_H] = dt_s, 1.0 / brake_horizon_s
+    p[_DT], p[_INV_H], p[_DTAU] = dt_s, 1.0 / brake_horizon_s, dtau_step_nm
+    p[_DDQ_STEP:_DDQ_STEP + 7] = ddq_step_rad_s2
     return p
+
+
+@njit(cache=True, nogil=True)
+def effective_jerk(M, ddq_step, dtau_step, dt_s, out):
+    """How fast each joint's commanded acceleration can change, rad/s^3, into ``out`` (7,): the jerk limit's step,
+    or half the torque-rate step divided by the joint's own inertia ``M_ii``, whichever is smaller (the half
+    leaves room for the coupling through the off-diagonal inertia). On the Panda's shoulder the torque rate
+    is the tighter one by far (about 200 vs 6750 rad/s^3)."""
+    for i in range(ddq_step.shape[0]):
+        out[i] = min(ddq_step[i], 0.5 * dtau_step / M[i, i]) / dt_s
+
+
+@njit(cache=True, nogil=True)
+def rate_box(tau_last, tau_lim, dtau_step, lo, hi):
+    """Torque bounds of one step into ``lo``, ``hi`` (7,): within the effort limits and within ``dtau_step`` of the
+    last torque the robot received. When the last torque lies outside the effort limits (it never should), the
+    bound moves it back toward them as fast as the rate allows: the rate condition always wins."""
+    for i in range(tau_last.shape[0]):
+        a = max(-tau_lim[i], tau_last[i] - dtau_step)
+        b = min(tau_lim[i], tau_last[i] + dtau_step)
+        if a > b:
+            a = b = tau_last[i] - dtau_step if tau_last[i] > 0.0 else tau_last[i] + dtau_step
+        lo[i], hi[i] = a, b
+
+
+@njit(cache=True, nogil=True)
+def jerk_box(ddq_last, ddq_step, lb, ub):
+    """Intersect the acceleration bounds ``lb``, ``ub`` (in place) with ``ddq_last +- ddq_step`` (the jerk limit).
+    Where they do not overlap, the bound is the point of the jerk box nearest to them (the commanded acceleration
+    moves toward what the position/velocity bounds ask for as fast as the jerk limit allows)."""
+    for i in range(ddq_last.shape[0]):
+        a = max(lb[i], ddq_last[i] - ddq_step[i])
+        b = min(ub[i], ddq_last[i] + ddq_step[i])
+        if a > b:
+            a = b = ddq_last[i] - ddq_step[i] if ddq_last[i] - ddq_step[i] > ub[i] else ddq_last[i] + ddq_step[i]
+        lb[i], ub[i] = a, b
 
 
 @njit(cache=True, nogil=True)
@@ -83,33 +125,55 @@ def log3(R, out):
 
 
 @njit(cache=True, nogil=True)
-def accel_bounds(q, dq, q_hi, q_lo, v_max, a_max, dt_s, inv_h, lb, ub):
+def ramp_speed(a_max, j, d):
+    """Largest speed from which a joint stops within distance ``d`` when its deceleration can only ramp up to
+    ``a_max`` at jerk ``j`` (first the ramp time ``a_max / j`` at constant speed, then braking at ``a_max``):
+    ``a (-T + sqrt(T^2 + 2 d / a))``, ``T = a_max / j``; ``sqrt(2 a_max d)`` for an unlimited jerk."""
+    if d <= 0.0:
+        return 0.0
+    t_ramp = a_max / j if j < 1e15 else 0.0
+    return a_max * (-t_ramp + math.sqrt(t_ramp * t_ramp + 2.0 * d / a_max))
+
+
+@njit(cache=True, nogil=True)
+def rise_accel(dv, j, dt_s):
+    """Largest acceleration for the next step after which the velocity, still rising while the acceleration ramps
+    down at jerk ``j``, gains at most ``dv`` > 0: the root of ``a dt + a^2 / (2 j) = dv``; ``dv / dt`` for an
+    unlimited jerk (and for ``dv <= 0``, where the joint must slow down now)."""
+    if dv <= 0.0 or j >= 1e15:
+        return dv / dt_s
+    return j * (-dt_s + math.sqrt(dt_s * dt_s + 2.0 * dv / j))
+
+
+@njit(cache=True, nogil=True)
+def accel_bounds(q, dq, q_hi, q_lo, v_max, a_max, dt_s, inv_h, j_eff, lb, ub):
     """Joint acceleration bounds of one control step into ``lb``, ``ub`` (7,); the arithmetic of
-    ``JointAccelerationBounds.__call__`` (see there for the rules)."""
-    inv_dt = 1.0 / dt_s
+    ``JointAccelerationBounds.__call__`` (see there for the rules). ``j_eff`` (7,): how fast each joint's
+    acceleration can change, rad/s^3 (>= 1e15: instantly)."""
     for i in range(q.shape[0]):
         qn = q[i] + dq[i] * dt_s
         d_hi = max(q_hi[i] - qn, 0.0)
         d_lo = max(qn - q_lo[i], 0.0)
-        v_hi = min(v_max[i], math.sqrt(2.0 * a_max[i] * d_hi), d_hi * inv_h)
-        v_lo = -min(v_max[i], math.sqrt(2.0 * a_max[i] * d_lo), d_lo * inv_h)
-        u = min(a_max[i], (v_hi - dq[i]) * inv_dt)
-        lo = max(-a_max[i], (v_lo - dq[i]) * inv_dt)
+        v_hi = min(v_max[i], ramp_speed(a_max[i], j_eff[i], d_hi), d_hi * inv_h)
+        v_lo = -min(v_max[i], ramp_speed(a_max[i], j_eff[i], d_lo), d_lo * inv_h)
+        u = min(a_max[i], rise_accel(v_hi - dq[i], j_eff[i], dt_s))
+        lo = max(-a_max[i], -rise_accel(dq[i] - v_lo, j_eff[i], dt_s))
         if lo > u:  # outside the viable set: brake toward the nearest viable velocity
             v_near = min(max(dq[i], v_lo), v_hi)
-            brake = min(max((v_near - dq[i]) * inv_dt, -a_max[i]), a_max[i])
+            brake = min(max((v_near - dq[i]) / dt_s, -a_max[i]), a_max[i])
             lo, u = brake, brake
         lb[i], ub[i] = lo, u
 
 
 @njit(cache=True, nogil=True)
 def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot, ref_w, ref_dw, q_post, q, dq,
-                params, P_x, g, A_x, lower, upper):
+                tau_last, ddq_last, params, P_x, g, A_x, lower, upper):
     """The task-space inverse-dynamics QP of one tick, written straight into OSQP's CSC value arrays.
 
     Same problem as ``TaskSpaceQP.problem`` (see there): ``P = J^T W J + p_diag I`` (upper triangle,
     column-major, 28 values), ``g``, ``A = [M; I]`` (column-major, 8 values per column) and the bounds
-    ``[-tau_lim - h, lb] <= A ddq <= [tau_lim - h, ub]``."""
+    ``[tau_lo - h, lb] <= A ddq <= [tau_hi - h, ub]`` (``tau_lo``, ``tau_hi``: :func:`rate_box` around
+    ``tau_last``; ``lb``, ``ub``: :func:`accel_bounds` intersected with :func:`jerk_box` around ``ddq_last``)."""
     n = 7
     # task-space error and desired acceleration
     R = np.empty((3, 3))
@@ -149,11 +213,15 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
             k += 1
         A_x[k] = 1.0
         k += 1
+    rate_box(tau_last, params[_TAU_LIM:_TAU_LIM + 7], params[_DTAU], lower[:n], upper[:n])
     for i in range(n):
-        lower[i] = -params[_TAU_LIM + i] - h[i]
-        upper[i] = params[_TAU_LIM + i] - h[i]
+        lower[i] -= h[i]
+        upper[i] -= h[i]
+    j_eff = np.empty(n)
+    effective_jerk(M, params[_DDQ_STEP:_DDQ_STEP + 7], params[_DTAU], params[_DT], j_eff)
     accel_bounds(q, dq, params[_Q_HI:_Q_HI + 7], params[_Q_LO:_Q_LO + 7], params[_V_MAX:_V_MAX + 7],
-                 params[_A_MAX:_A_MAX + 7], params[_DT], params[_INV_H], lower[n:], upper[n:])
+                 params[_A_MAX:_A_MAX + 7], params[_DT], params[_INV_H], j_eff, lower[n:], upper[n:])
+    jerk_box(ddq_last, params[_DDQ_STEP:_DDQ_STEP + 7], lower[n:], upper[n:])
 
 
 @njit(cache=True, nogil=True)
@@ -169,6 +237,22 @@ def torque(M, h, ddq, out):
         out[i] = s
         ok = ok and math.isfinite(s)
     return ok
+
+
+@njit(cache=True, nogil=True)
+def clamp_rate(tau, tau_last, dtau_hard):
+    """Clamp ``tau`` (in place) to ``tau_last +- dtau_hard``: the last guard against a solver's tolerance.
+    Returns the largest correction it made, N m (0.0: the command was already inside)."""
+    worst = 0.0
+    for i in range(tau.shape[0]):
+        lo, hi = tau_last[i] - dtau_hard, tau_last[i] + dtau_hard
+        if tau[i] > hi:
+            worst = max(worst, tau[i] - hi)
+            tau[i] = hi
+        elif tau[i] < lo:
+            worst = max(worst, lo - tau[i])
+            tau[i] = lo
+    return worst
 
 
 @njit(cache=True, nogil=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from controllers.mpc import MPCConfig
@@ -42,6 +43,14 @@ class StackConfig:
         duration_s: episode length, s.
         receding_k: receding: waypoints executed per chunk before replanning (0: ``1 / (replan_hz * chunk dt)``).
         ensemble_decay_per_s: temporal_ensemble: weight ``exp(-decay * (t0_chunk - t0_oldest))``.
+        chunk_timeout_s: stale-chunk watchdog: when no valid chunk has arrived for this long (or the active
+            chunk has run out) the reference brakes to rest within the smoother's limits and holds, s.
+        splice_radius_m: a chunk whose position at its activation is farther than this from the reference
+            being executed is rejected (the previous chunk keeps running), m.
+        plan_resync_m, plan_resync_m_s: an MPC plan starts from the state being tracked unless the TCP is
+            farther than this from it (then from the measured state), m and m/s.
+        abort_after_missed_ticks: this many missed control ticks in a row abort the episode, as on the Panda
+            (``communication_constraints_violation``).
     """
 
     mode: str = "hybrid"
@@ -57,6 +66,11 @@ class StackConfig:
     duration_s: float = 6.0
     receding_k: int = 0
     ensemble_decay_per_s: float = 1.0
+    chunk_timeout_s: float = 2.5
+    splice_radius_m: float = 0.1
+    plan_resync_m: float = 0.02
+    plan_resync_m_s: float = 0.25
+    abort_after_missed_ticks: int = 20
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -81,6 +95,15 @@ class StackConfig:
             raise ValueError(f"receding_k must be >= 0, got {self.receding_k}")
         if not self.ensemble_decay_per_s >= 0:
             raise ValueError(f"ensemble_decay_per_s must be >= 0, got {self.ensemble_decay_per_s}")
+        if not (self.chunk_timeout_s > 0 and math.isfinite(self.chunk_timeout_s)):
+            raise ValueError(f"chunk_timeout_s must be a finite number > 0, got {self.chunk_timeout_s}")
+        if not self.splice_radius_m > 0:
+            raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
+        if not (self.plan_resync_m > 0 and self.plan_resync_m_s > 0):
+            raise ValueError(f"plan_resync_m and plan_resync_m_s must be > 0, got {self.plan_resync_m}, "
+                             f"{self.plan_resync_m_s}")
+        if self.abort_after_missed_ticks < 1:
+            raise ValueError(f"abort_after_missed_ticks must be >= 1, got {self.abort_after_missed_ticks}")
         if self.latency_ms / 1000.0 >= self.duration_s:
             raise ValueError(
                 f"latency_ms={self.latency_ms:g} is not shorter than the episode ({self.duration_s:g} s): no chunk would ever run"

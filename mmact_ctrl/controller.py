@@ -7,11 +7,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from controllers.mpc import MPCPlan, TaskSpaceMPC
-from controllers.qp_id import TaskReference, TaskSpaceQP
+from controllers.qp_id import TaskReference, TaskSpaceQP, commanded_accel
 from controllers.retarget import retarget_offset, retarget_offsets, trusted
 from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import orientation_error, rot_from_rotvec, rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
+from controllers.stop import StopTrajectory
 from controllers.target_filter import TargetFilter
 from controllers.tick_kernels import sample_plan_task
 from mmact_ctrl.chunk import ActionChunk
@@ -23,12 +24,23 @@ GRIPPER_OPEN_M = 0.08
 
 @dataclass
 class TickOutput:
-    """What one control tick produced (for logging)."""
+    """What one control tick produced: the command, and what the safety monitor and the log need.
+
+    Attributes:
+        tau_nm (7,): the torque command, N*m.
+        gripper_m: gripper opening command, m.
+        ref_pos_m (3,): the task-space reference the tick tracked (before the MPC), m.
+        ee_pos_m (3,): the TCP position (controller's model), m.
+        ddq_cmd_rad_s2 (7,): the joint acceleration the command asks for in this state (``M^-1 (tau - h)``).
+        tcp_vel_m_s (3,): the TCP linear velocity (controller's model), m/s.
+    """
 
     tau_nm: np.ndarray
     gripper_m: float
     ref_pos_m: np.ndarray
     ee_pos_m: np.ndarray
+    ddq_cmd_rad_s2: np.ndarray
+    tcp_vel_m_s: np.ndarray
 
 
 class HybridController:
@@ -58,18 +70,30 @@ class HybridController:
         self._blend_end_s = 0.0
         self._hold_pos = np.zeros(3)
         self._hold_rotvec = np.zeros(3)
+        self._gripper_m = GRIPPER_OPEN_M
         self.terms: RobotTerms | None = None
+        self.stop: StopTrajectory | None = None  # the watchdog's braking reference while no valid chunk covers now
+        self.watchdog_stops = 0
+        self.plan_resyncs = 0  # MPC plans started from the measured state because the robot left the tracked one
 
     # ---- episode -----------------------------------------------------------
-    def reset(self, q_rad: np.ndarray) -> None:
-        """New episode: hold the current pose until the first chunk is active."""
-        pos, rot = self.model.fk(np.asarray(q_rad, dtype=float))
+    def reset(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None) -> np.ndarray:
+        """New episode: hold the current pose until the first chunk is active. Returns the torque the robot is
+        taken to apply before the first command, ``h(q, dq)`` (gravity, Coriolis, damping: what a Panda's own
+        gravity compensation does with a zero user torque); the first command's rate is measured against it."""
+        q = np.asarray(q_rad, dtype=float)
+        dq = np.zeros(7) if dq_rad_s is None else np.asarray(dq_rad_s, dtype=float)
+        pos, rot = self.model.fk(q)
         self._hold_pos = pos
         self._hold_rotvec = rotvec_from_rot(rot, self.rot_nominal)
+        self._gripper_m = GRIPPER_OPEN_M
         self.smoother.reset(pos, self._hold_rotvec)
         self.filter = TargetFilter(self.filter.config)
-        self.qp.failures = 0
-        self.qp.solves = 0
+        tau_start = np.array(self.model.terms(q, dq).h)
+        self.qp.reset(tau_start)
+        self.stop = None
+        self.watchdog_stops = 0
+        self.plan_resyncs = 0
         self._plan = None
         self._next_mpc_s = 0.0
         if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
@@ -78,6 +102,7 @@ class HybridController:
         self.active = None
         self.ensemble = []
         self._trusted = False
+        return tau_start
 
     def ee_pose(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """TCP position (m) and rotation vector relative to the nominal grasp (rad) at ``q``."""
@@ -95,7 +120,8 @@ class HybridController:
         return self.filter.pos_m if self.filter.initialized else None
 
     def activate(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> None:
-        """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency)."""
+        """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency); ends a watchdog stop."""
+        self.stop = None
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
         # snap's blend ends at the last waypoint that will actually run: the next chunk is due one replan period on
@@ -116,9 +142,32 @@ class HybridController:
             total += w
         return action / total, rate / total
 
+    # ---- the stale-chunk watchdog ----------------------------------------------------
+    def covered(self, t_s: float) -> bool:
+        """Whether a chunk (or, before the first one, the initial hold) covers ``t_s``."""
+        return self.active is None or t_s <= self.active.t_last_s  # the newest chunk ends last
+
+    def watchdog(self, t_s: float) -> bool:
+        """No valid chunk covers ``t_s``: brake the reference to rest from where it is now, within the smoother's
+        acceleration and jerk limits, and hold there until a new chunk is activated. Returns whether a stop
+        started now (counted in ``watchdog_stops``); a stop already under way goes on."""
+        if self.stop is not None:
+            return False
+        pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
+        sc = self.config.smoother
+        self.stop = StopTrajectory(t_s, np.concatenate([pos, rotvec, [gripper]]),
+                                   np.concatenate([vel, rotvec_rate, [0.0]]), sc.a_max_m_s2, sc.j_max_m_s3,
+                                   sc.dw_max_rad_s2, sc.ddw_max_rad_s3)
+        self._trusted = False
+        self.watchdog_stops += 1
+        return True
+
     # ---- the 1 kHz tick ------------------------------------------------------------
     def reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing."""
+        if self.stop is not None:
+            action, rate = self.stop.sample(t_s)
+            return action[:3], rate[:3], action[3:6], rate[3:6], float(action[6])
         if self.active is None:
             return self._hold_pos, np.zeros(3), self._hold_rotvec, np.zeros(3), GRIPPER_OPEN_M
         action, rate = self._ensemble_sample(t_s) if self._ensemble_mode else self.active.sample(t_s)
@@ -140,6 +189,8 @@ class HybridController:
     def reference_positions(self, times_s: np.ndarray) -> np.ndarray:
         """Positions (N, 3) of :meth:`reference` at many times at once (the MPC's preview), vectorized."""
         times_s = np.asarray(times_s, dtype=float)
+        if self.stop is not None:
+            return self.stop.sample_positions(times_s)
         if self.active is None:
             return np.tile(self._hold_pos, (len(times_s), 1))
         if self._ensemble_mode:
@@ -150,14 +201,33 @@ class HybridController:
                                          self.filter.predict_pos_many(times_s), self.active.t_active_s, self._blend_end_s)
         return pos
 
+    def _plan_start(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms):
+        """Where a new MPC plan starts: the joint state of the current plan at ``t_s`` (the state the QP is
+        tracking), so the TCP reference the QP follows is continuous in position and velocity across the
+        hand-over and the plan switch asks it for no torque step. The measured state when there is no plan yet,
+        or when the TCP has left the tracked one by more than ``config.plan_resync_m`` / ``plan_resync_m_s``
+        (counted in ``plan_resyncs``). The comparison is in task space: the QP tracks the TCP and only pulls the
+        null space toward the plan's posture, so the joints may differ from the plan where the TCP does not.
+        Returns (q, dq, TCP position, TCP rotation, Jacobian) at that state."""
+        plan = self._plan
+        if plan is not None:
+            q_ref, dq_ref, _ = plan.sample(t_s)
+            pos, rot, jac = self.model.kinematics(q_ref)
+            if (np.linalg.norm(pos - terms.pos_m) <= self.config.plan_resync_m
+                    and np.linalg.norm(jac[:3] @ dq_ref - terms.vel[:3]) <= self.config.plan_resync_m_s):
+                return q_ref, dq_ref, pos, rot, jac
+            self.plan_resyncs += 1
+        return q_rad, dq_rad_s, terms.pos_m, terms.rot, terms.J
+
     def _solve_mpc(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms, rot_des: np.ndarray) -> MPCPlan:
         """Preview the reference over the MPC horizon (retargeted chunk, predicted target, and the
-        Ruckig offset still to be smoothed away) and plan within the joint limits."""
+        Ruckig offset still to be smoothed away) and plan within the joint limits, from :meth:`_plan_start`."""
         taus = self._mpc_taus
         preview = self.reference_positions(t_s + taus)
         if self.config.use_ruckig and self.config.smoother.relative:
             preview = preview + self.smoother.preview_pos_offset(taus)
-        return self.mpc.solve(t_s, q_rad, dq_rad_s, terms.pos_m, terms.J, preview, orientation_error(rot_des, terms.rot))
+        q0, dq0, pos0, rot0, jac0 = self._plan_start(t_s, q_rad, dq_rad_s, terms)
+        return self.mpc.solve(t_s, q0, dq0, pos0, jac0, preview, orientation_error(rot_des, rot0))
 
     def _smoothed_reference(self, t_s: float):
         """(pos, vel, acc, rot, ang_vel, ang_acc, gripper): the reference after retargeting and Ruckig."""
@@ -202,4 +272,17 @@ class HybridController:
             q_post_rad=q_post,
         )
         tau = self.qp.solve(terms, q_rad, dq_rad_s, ref)
-        return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=ref_pos, ee_pos_m=terms.pos_m)
+        self._gripper_m = gripper
+        return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=ref_pos, ee_pos_m=terms.pos_m,
+                          ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])
+
+    def missed_tick(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
+        """A control tick whose command never reached the robot: the robot re-applies the last torque it received.
+        Nothing is planned; the QP records the held torque (the next command's rate is measured against it) and
+        the acceleration it commands in this state, for the safety monitor."""
+        terms = self.model.terms(q_rad, dq_rad_s)
+        self.terms = terms
+        tau = self.qp.tau_last if self.qp.tau_last is not None else np.array(terms.h)
+        ddq = self.qp.hold(terms, tau)
+        return TickOutput(tau_nm=self.qp.tau_last, gripper_m=self._gripper_m, ref_pos_m=np.full(3, np.nan),
+                          ee_pos_m=terms.pos_m, ddq_cmd_rad_s2=ddq, tcp_vel_m_s=terms.vel[:3])

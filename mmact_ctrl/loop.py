@@ -8,12 +8,14 @@ are skipped (the reference is indexed by absolute time).
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
-from mmact_ctrl.chunk import ActionChunk, ChunkSource, Observation
+from controllers.safety import CommandLimits, SafetyMonitor
+from mmact_ctrl.chunk import ChunkSource, Observation
+from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.reference import ChunkReference
 from mmact_ctrl.world import World
@@ -21,7 +23,15 @@ from mmact_ctrl.world import World
 
 @dataclass
 class EpisodeLog:
-    """Everything recorded in one episode (arrays sampled every control period)."""
+    """Everything recorded in one episode (arrays sampled every control period; shorter than the episode
+    when it was aborted).
+
+    Safety (``controllers.safety``): ``safety_counts`` ticks flagged per kind, ``safety_mask`` the per-tick
+    bitmask, ``torque_rate_max_nm_s`` the largest torque rate sent. Faults survived: ``rejections`` chunks
+    rejected per reason (``mmact_ctrl.chunk_intake``), ``watchdog_stops``, ``gated_measurements`` (per gate),
+    ``missed_ticks``; ``abort`` is ``{"t_s", "reason"}`` when the robot would have aborted the motion.
+    ``events`` lists ``(t_s, what, detail)`` of every fault handled.
+    """
 
     seed: int
     t_s: np.ndarray
@@ -32,6 +42,7 @@ class EpisodeLog:
     dq_rad_s: np.ndarray
     tau_cmd_nm: np.ndarray
     tick_us: np.ndarray
+    safety_mask: np.ndarray | None = None
     chunk_active_s: list[float] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     jump_times_s: tuple[float, ...] = ()
@@ -44,6 +55,32 @@ class EpisodeLog:
     wall_s: float = 0.0
     instruction: str = ""
     frames: list[np.ndarray] = field(default_factory=list)
+    safety_counts: dict[str, int] = field(default_factory=dict)
+    torque_rate_max_nm_s: float = 0.0
+    rejections: dict[str, int] = field(default_factory=dict)
+    watchdog_stops: int = 0
+    gated_measurements: dict[str, int] = field(default_factory=dict)
+    perception_errors: int = 0
+    missed_ticks: int = 0
+    rate_clamps: int = 0
+    plan_resyncs: int = 0
+    abort: dict | None = None
+    events: list[tuple[float, str, str]] = field(default_factory=list)
+
+    def truncate(self, n: int) -> None:
+        """Keep the first ``n`` samples (an aborted episode)."""
+        for name in ("t_s", "ee_pos_m", "target_pos_m", "ref_pos_m", "q_rad", "dq_rad_s", "tau_cmd_nm", "tick_us",
+                     "safety_mask", "objects_pos_m"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, value[:n])
+
+
+class CommandLink(Protocol):
+    """The link from the controller to the robot: whether the command of tick ``k`` reaches it."""
+
+    def delivered(self, k: int, t_s: float) -> bool:
+        ...
 
 
 def observe(world: World, controller: HybridController, t_s: float, with_image: bool) -> Observation:
@@ -73,7 +110,7 @@ def receding_k(cfg, chunk: ActionChunk) -> int:
 def known_prefix(controller: HybridController, pending, t_s: float, latency_s: float, source) -> np.ndarray:
     """Inpainting: the waypoints (n, 7) that will run while the next chunk is computed, taken from the
     chunk that will be executing then (the last one scheduled), at the new chunk's waypoint times."""
-    scheduled = pending[-1][1] if pending else (controller.active.chunk if controller.active else None)
+    scheduled = pending[-1].chunk if pending else (controller.active.chunk if controller.active else None)
     if scheduled is None:
         return np.zeros((0, 7))
     dt = getattr(source, "chunk_dt_s", scheduled.dt_s)
@@ -89,18 +126,33 @@ def run_episode(
     seed: int,
     video_fps: float = 0.0,
     progress=None,
+    link: CommandLink | None = None,
+    initial_dq_rad_s: np.ndarray | None = None,
 ) -> EpisodeLog:
     """Run one episode of ``controller.config.duration_s`` and return its log.
+
+    Nothing a fault does escapes this loop: a chunk source that raises or answers garbage is rejected and
+    counted (:class:`~mmact_ctrl.chunk_intake.ChunkIntake`), silence is met by the watchdog's stop, a bad
+    measurement is gated by the filter, a missed tick holds the last torque, and every command sent is checked
+    by the safety monitor (``controllers.safety``). Only ``abort_after_missed_ticks`` missed ticks in a row end
+    the episode early, as they abort the motion of a real Panda.
 
     Args:
         video_fps: when > 0, render camera frames at this rate into ``EpisodeLog.frames``.
         progress: optional callable(fraction) for progress reporting.
+        link: whether each tick's command reaches the robot (None: always).
+        initial_dq_rad_s: joint velocities (7,) the robot has at the start (None: at rest).
     """
     cfg = controller.config
     dt = cfg.dt_s
     n = int(round(cfg.duration_s / dt))
     state = world.reset(seed)
-    controller.reset(state.q_rad)
+    if initial_dq_rad_s is not None:
+        state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
+    tau_start = controller.reset(state.q_rad, state.dq_rad_s)
+    monitor = SafetyMonitor(CommandLimits(dt_s=dt))
+    monitor.reset(tau_start)
+    intake = ChunkIntake(cfg.splice_radius_m, getattr(source, "action_token_range", None))
     latency_s = cfg.latency_ms / 1000.0
     replan_period_s = 1.0 / cfg.replan_hz
     eps = 0.5 * dt
@@ -115,6 +167,7 @@ def run_episode(
         dq_rad_s=np.empty((n, 7)),
         tau_cmd_nm=np.empty((n, 7)),
         tick_us=np.empty(n),
+        safety_mask=np.zeros(n, dtype=np.uint16),
         instruction=world.instruction,
     )
     objects_fn = getattr(world, "objects_pos_m", None)  # optional part of the world: distractors
@@ -122,19 +175,26 @@ def run_episode(
     if n_objects > 1:
         log.objects_pos_m = np.empty((n, n_objects, 3))
         log.target_index = int(getattr(world, "target_index", 0))
-    pending: deque[tuple[float, ActionChunk, np.ndarray | None]] = deque()
     next_plan_s = 0.0
+    last_arrival_s = 0.0  # the watchdog's clock: the last valid chunk (or the start)
     mode = cfg.mode
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
     render_video = getattr(world, "render_video", None)  # optional part of a world: a larger frame for videos
     perception_every = cfg.perception_every
+    missed_in_row = 0
+    n_done = n
     wall0 = time.perf_counter()
     for k in range(n):
         t = k * dt
         state = world.state()
         perceive = k % perception_every == 0
-        z = world.measure_target() if perceive else None
         if perceive:  # fuse before planning so a chunk observed now records the estimate of now
+            try:
+                z = world.measure_target()
+            except Exception as exc:  # noqa: BLE001 - a crashed sensor is a lost measurement
+                z = None
+                log.perception_errors += 1
+                log.events.append((t, "perception_error", f"{type(exc).__name__}: {exc}"[:200]))
             tick0 = time.perf_counter()
             controller.perceive(t, z)
             perception_us = (time.perf_counter() - tick0) * 1e6
@@ -142,27 +202,46 @@ def run_episode(
             perception_us = 0.0
         if t >= next_plan_s - eps:
             obs = observe(world, controller, t, with_image=source.needs_image)
-            p0 = time.perf_counter()
             if mode == "inpaint":
-                chunk = source.plan_inpaint(obs, known_prefix(controller, pending, t, latency_s, source))
+                prefix = known_prefix(controller, intake.pending, t, latency_s, source)
+                call = lambda: source.plan_inpaint(obs, prefix)  # noqa: E731
             else:
-                chunk = source.plan(obs)
+                call = lambda: source.plan(obs)  # noqa: E731
+            p0 = time.perf_counter()
+            chunk = intake.request(call, obs)
             log.plan_ms.append((time.perf_counter() - p0) * 1e3)
-            log.clipped_actions += chunk.n_clipped
-            delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
-            pending.append((t + delay_s, chunk, controller.target_estimate()))
-            if mode == "receding":  # the next query is set when this chunk starts running
+            if chunk is not None:
+                log.clipped_actions += chunk.n_clipped
+                delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
+                delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
+                intake.submit(t + delay_s, chunk, controller.target_estimate())
+            if mode == "receding" and chunk is not None:  # the next query is set when this chunk starts running
                 next_plan_s = float("inf")
             else:
-                next_plan_s += replan_period_s
+                next_plan_s = t + replan_period_s if mode == "receding" else next_plan_s + replan_period_s
         tick0 = time.perf_counter()
-        while pending and pending[0][0] <= t + eps:
-            t_act, chunk, target_at_obs = pending.popleft()
-            controller.activate(chunk, t, target_at_obs)
-            log.chunk_active_s.append(t)
-            if mode == "receding":  # query again once k waypoints of this chunk have run
-                next_plan_s = t + receding_k(cfg, chunk) * chunk.dt_s
-        out = controller.tick(t, state.q_rad, state.dq_rad_s)
+        for entry in intake.due(t + eps):
+            if intake.admit(entry, t, controller.active, controller.reference(t)[0]):
+                controller.activate(entry.chunk, t, entry.target_at_obs_m)
+                log.chunk_active_s.append(t)
+                last_arrival_s = t
+                if mode == "receding":  # query again once k waypoints of this chunk have run
+                    next_plan_s = t + receding_k(cfg, entry.chunk) * entry.chunk.dt_s
+            elif mode == "receding" and next_plan_s == float("inf"):
+                next_plan_s = t  # the chunk it waited for was refused: ask again now
+        if controller.stop is None and (not controller.covered(t) or t - last_arrival_s > cfg.chunk_timeout_s):
+            controller.watchdog(t)
+            log.events.append((t, "watchdog_stop", ""))
+        if link is None or link.delivered(k, t):
+            missed_in_row = 0
+            out = controller.tick(t, state.q_rad, state.dq_rad_s)
+        else:
+            missed_in_row += 1
+            log.missed_ticks += 1
+            out = controller.missed_tick(state.q_rad, state.dq_rad_s)
+        mask = monitor.check(out.tau_nm, state.q_rad, state.dq_rad_s, out.ddq_cmd_rad_s2, out.tcp_vel_m_s)
+        tau = out.tau_nm if (mask & 1) == 0 else controller.qp.tau_last  # never send a non-finite torque
+        log.safety_mask[k] = mask
         log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + perception_us
         log.ee_pos_m[k] = state.ee_pos_m
         log.target_pos_m[k] = world.target_pos_m()
@@ -171,16 +250,32 @@ def run_episode(
         log.ref_pos_m[k] = out.ref_pos_m
         log.q_rad[k] = state.q_rad
         log.dq_rad_s[k] = state.dq_rad_s
-        log.tau_cmd_nm[k] = out.tau_nm
+        log.tau_cmd_nm[k] = tau
+        if missed_in_row >= cfg.abort_after_missed_ticks:
+            log.abort = {"t_s": float(t), "reason": "communication_constraints_violation"}
+            log.events.append((t, "abort", f"{missed_in_row} missed ticks in a row"))
+            n_done = k + 1
+            break
         if frame_every and k % frame_every == 0:
             log.frames.append(render_video() if render_video else world.render()[0])
-        world.step(out.tau_nm, out.gripper_m)
+        world.step(tau, out.gripper_m)
         if progress is not None and k % 500 == 0:
             progress(k / n)
     log.wall_s = time.perf_counter() - wall0
+    if n_done < n:
+        log.truncate(n_done)
     log.qp_failures = controller.qp.failures
+    log.rate_clamps = controller.qp.rate_clamps
     log.smoother_failures = controller.smoother.failures
     if controller.mpc is not None:
         log.mpc_failures = controller.mpc.failures + controller.mpc.late
+    log.plan_resyncs = controller.plan_resyncs
+    log.safety_counts = monitor.counts
+    log.torque_rate_max_nm_s = monitor.torque_rate_max_nm_s
+    log.rejections = dict(intake.rejections)
+    log.events = sorted(log.events + intake.events)
+    log.watchdog_stops = controller.watchdog_stops
+    f = controller.filter
+    log.gated_measurements = {"nonfinite": f.gated_nonfinite, "frozen": f.gated_frozen, "outlier": f.gated_outlier}
     log.jump_times_s = tuple(t for t in world.target_jump_times_s() if t <= cfg.duration_s)
     return log

@@ -7,8 +7,17 @@
 - tracking_ratio: fraction of the episode's samples with the TCP within the success radius.
 - jerk_rms: RMS of the TCP jerk (m/s^3), from the measured TCP position resampled at
   ``jerk_rate_hz`` (100 Hz: the jerk of the motion, not of the 1 kHz torque steps).
-- limit_violations: control ticks with a measured joint position outside its limits, a measured
-  joint velocity above its limit, or a commanded torque above the effort limit (before any clipping).
+- safety (``controllers.safety.SafetyMonitor``, run on every tick on the command actually sent): ticks
+  flagged per kind: ``nonfinite_commands``, ``torque_rate_violations`` (|dtau/dt| > 1000 N m/s),
+  ``torque_violations`` (|tau| > effort limit), ``position_violations``, ``velocity_violations``,
+  ``accel_violations`` and ``jerk_violations`` (the commanded joint acceleration and its backward-Euler
+  jerk), ``tcp_speed_violations`` (> 1.7 m/s); ``torque_rate_max_nm_s``, the largest torque rate sent.
+- limit_violations: the sum of every kind above (until 2026-12 it counted only joint position, velocity
+  and torque magnitude, which hid the torque rate, the one condition a Panda in torque control aborts on).
+- faults survived: ``rejected_chunks`` (and ``rejections`` per reason, ``mmact_ctrl.chunk_intake``),
+  ``watchdog_stops``, ``gated_measurements`` (non-finite, frozen, outlier), ``missed_ticks``, ``aborts``
+  (episodes the robot would have aborted: 20 missed ticks in a row), ``rate_clamps`` (solver-tolerance
+  corrections of the last guard), ``plan_resyncs``.
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
@@ -22,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.robot_description import JointLimits
 from mmact_ctrl.loop import EpisodeLog
 
 
@@ -32,7 +40,6 @@ class MetricsConfig:
     success_hold_s: float = 0.3
     jerk_rate_hz: float = 100.0
     jump_window_s: float = 1.0
-    limit_tol: float = 1e-6
 
 
 def _first_hold_start(inside: np.ndarray, hold_n: int) -> int | None:
@@ -45,13 +52,25 @@ def _first_hold_start(inside: np.ndarray, hold_n: int) -> int | None:
     return None
 
 
-def limit_violation_mask(log: EpisodeLog, limits: JointLimits = JointLimits(), tol: float = 1e-6) -> np.ndarray:
-    """Per-tick bool: any joint position, velocity or commanded torque beyond its limit."""
-    lim = limits.arrays()
-    pos = (log.q_rad < lim["q_min_rad"] - tol) | (log.q_rad > lim["q_max_rad"] + tol)
-    vel = np.abs(log.dq_rad_s) > lim["v_max_rad_s"] + tol
-    tau = np.abs(log.tau_cmd_nm) > lim["tau_max_nm"] + tol
-    return np.any(pos | vel | tau, axis=1)
+def limit_violation_mask(log: EpisodeLog) -> np.ndarray:
+    """Per-tick bool: the safety monitor flagged the command of that tick (any kind)."""
+    return log.safety_mask != 0
+
+
+#: summary key of each safety kind (``controllers.safety.KINDS``)
+SAFETY_KEYS: dict[str, str] = {
+    "nonfinite": "nonfinite_commands",
+    "torque_rate": "torque_rate_violations",
+    "torque": "torque_violations",
+    "position": "position_violations",
+    "velocity": "velocity_violations",
+    "accel": "accel_violations",
+    "jerk": "jerk_violations",
+    "tcp_speed": "tcp_speed_violations",
+}
+#: fault counters summed over episodes
+FAULT_KEYS: tuple[str, ...] = ("rejected_chunks", "watchdog_stops", "gated_measurements", "missed_ticks", "aborts",
+                               "rate_clamps", "plan_resyncs", "perception_errors")
 
 
 def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
@@ -81,7 +100,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
                 continue
             near = np.linalg.norm(log.ee_pos_m - log.objects_pos_m[:, j], axis=1) < config.success_radius_m
             wrong_object |= _first_hold_start(near, hold_n) is not None
-    violations = limit_violation_mask(log, tol=config.limit_tol)
+    safety = {key: int(log.safety_counts.get(kind, 0)) for kind, key in SAFETY_KEYS.items()}
     recovered, recovery_s = [], []
     for tj in log.jump_times_s:
         j0 = int(np.ceil(tj / dt)) + 1
@@ -104,7 +123,20 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "tracking_ratio": float(inside.mean()),
         "jerk_rms": float(np.sqrt(np.mean(np.sum(jerk**2, axis=1)))),
         "chunk_jump_acc_m_s2": float(max(switch_acc)) if switch_acc else 0.0,
-        "limit_violations": int(violations.sum()),
+        "limit_violations": int(sum(safety.values())),
+        **safety,
+        "torque_rate_max_nm_s": float(log.torque_rate_max_nm_s),
+        "rejected_chunks": int(sum(log.rejections.values())),
+        "rejections": {k: int(v) for k, v in log.rejections.items() if v},
+        "watchdog_stops": int(log.watchdog_stops),
+        "gated_measurements": int(sum(log.gated_measurements.values())),
+        "gated": {k: int(v) for k, v in log.gated_measurements.items() if v},
+        "missed_ticks": int(log.missed_ticks),
+        "aborts": int(log.abort is not None),
+        "abort": log.abort,
+        "rate_clamps": int(log.rate_clamps),
+        "plan_resyncs": int(log.plan_resyncs),
+        "perception_errors": int(log.perception_errors),
         "qp_failures": int(log.qp_failures),
         "smoother_failures": int(log.smoother_failures),
         "mpc_failures": int(log.mpc_failures),
@@ -148,6 +180,9 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "jerk_rms": float(np.mean([e["jerk_rms"] for e in episodes])),
         "chunk_jump_acc_m_s2": float(np.mean([e["chunk_jump_acc_m_s2"] for e in episodes])),
         "limit_violations": int(sum(e["limit_violations"] for e in episodes)),
+        **{key: int(sum(e.get(key, 0) for e in episodes)) for key in SAFETY_KEYS.values()},
+        "torque_rate_max_nm_s": float(max(e.get("torque_rate_max_nm_s", 0.0) for e in episodes)),
+        **{key: int(sum(e.get(key, 0) for e in episodes)) for key in FAULT_KEYS},
         "qp_failures": int(sum(e["qp_failures"] for e in episodes)),
         "mpc_failures": int(sum(e.get("mpc_failures", 0) for e in episodes)),
         "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),

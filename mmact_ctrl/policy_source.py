@@ -49,6 +49,12 @@ class PolicyChunkSource:
     def chunk_dt_s(self) -> float:
         return float(self.policy.chunk_dt_s)
 
+    @property
+    def action_token_range(self) -> tuple[int, int]:
+        """Half-open range of the action tokens in the shared vocabulary."""
+        tok = self.policy.action_tokenizer
+        return int(tok.token_offset), int(tok.token_offset) + int(tok.bins)
+
     def _chunk(self, tokens: np.ndarray, actions: np.ndarray, observation: Observation) -> ActionChunk:
         return ActionChunk(waypoints=actions, dt_s=self.chunk_dt_s, t0_s=observation.t0_s, tokens=tokens)
 

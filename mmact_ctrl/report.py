@@ -16,7 +16,15 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("tracking ratio", "tracking_ratio", "{:.2f}"),
     ("jerk RMS [m/s^3]", "jerk_rms", "{:.1f}"),
     ("chunk-switch acc [m/s^2]", "chunk_jump_acc_m_s2", "{:.2f}"),
-    ("limit violations", "limit_violations", "{:d}"),
+    ("limit violations (all kinds)", "limit_violations", "{:d}"),
+    ("  torque rate > 1000 N m/s", "torque_rate_violations", "{:d}"),
+    ("  accel / jerk", ("accel_violations", "jerk_violations"), "{:d} / {:d}"),
+    ("  non-finite commands", "nonfinite_commands", "{:d}"),
+    ("max torque rate [N m/s]", "torque_rate_max_nm_s", "{:.0f}"),
+    ("rejected chunks", "rejected_chunks", "{:d}"),
+    ("watchdog stops", "watchdog_stops", "{:d}"),
+    ("gated measurements", "gated_measurements", "{:d}"),
+    ("aborts", "aborts", "{:d}"),
     ("QP failures", "qp_failures", "{:d}"),
     ("MPC failures/late", "mpc_failures", "{:d}"),
     ("tick median [us]", "tick_us.median", "{:.0f}"),
@@ -27,7 +35,9 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
 )
 
 
-def _get(summary: dict, key: str):
+def _get(summary: dict, key):
+    if isinstance(key, tuple):
+        return tuple(_get(summary, k) for k in key)
     value = summary
     for part in key.split("."):
         value = value.get(part) if isinstance(value, dict) else None
@@ -35,6 +45,8 @@ def _get(summary: dict, key: str):
 
 
 def _fmt(value, fmt: str) -> str:
+    if isinstance(value, tuple):
+        return "-" if any(v is None for v in value) else fmt.format(*value)
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"
     if fmt == "mm":

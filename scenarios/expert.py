@@ -72,6 +72,12 @@ class ScriptedExpert:
     def chunk_dt_s(self) -> float:
         return self.config.dt_s
 
+    @property
+    def action_token_range(self) -> tuple[int, int] | None:
+        """Half-open range of the action tokens its chunks carry (None: not quantized)."""
+        tok = self.tokenizer
+        return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
+
     def plan(self, observation: Observation) -> ActionChunk:
         actions = expert_actions(self.config, observation.ee_pos_m, observation.target_pos_m)
         return self._finish(actions, observation)

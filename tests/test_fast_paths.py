@@ -46,11 +46,13 @@ def test_accel_bounds_match_numpy_reference_including_outside_the_viable_set():
     rng = np.random.default_rng(1)
     lb, ub = np.empty(7), np.empty(7)
     crossed = 0
-    for _ in range(500):
+    for k in range(500):
         q = rng.uniform(b.q_lo - 0.1, b.q_hi + 0.1)  # some states beyond the margined limits
         dq = rng.normal(0, 1.5, 7)
-        accel_bounds(q, dq, b.q_hi, b.q_lo, b.v_max, b.a_max, b.dt_s, b.inv_h, lb, ub)
-        ref_lb, ref_ub = b(q, dq)
+        # half the draws with an unlimited jerk (the one-step bounds), half with a torque-rate-limited one
+        j_eff = np.full(7, np.inf) if k % 2 else rng.uniform(100.0, 10000.0, 7)
+        accel_bounds(q, dq, b.q_hi, b.q_lo, b.v_max, b.a_max, b.dt_s, b.inv_h, j_eff, lb, ub)
+        ref_lb, ref_ub = b(q, dq, None if k % 2 else j_eff)
         np.testing.assert_allclose(lb, ref_lb, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(ub, ref_ub, rtol=1e-12, atol=1e-9)
         crossed += int(np.any(ref_lb == ref_ub))
@@ -65,6 +67,8 @@ def test_assembled_qp_equals_the_dense_problem(model):
         q = model.home_q_rad + rng.normal(0, 0.3, 7)
         dq = rng.normal(0, 0.5, 7)
         terms = model.terms(q, dq)
+        # a last torque near the bias torque and a last commanded acceleration: the rate and jerk boxes bind
+        qp.reset(terms.h + rng.normal(0, 3.0, 7), rng.normal(0, 8.0, 7))
         ref = TaskReference(terms.pos_m + rng.normal(0, 0.05, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1, 3),
                             _rot(rng) @ terms.rot if rng.random() < 0.5 else terms.rot, rng.normal(0, 0.3, 3),
                             rng.normal(0, 1, 3), model.home_q_rad + rng.normal(0, 0.1, 7))
@@ -72,7 +76,7 @@ def test_assembled_qp_equals_the_dense_problem(model):
         P_x, g_k, A_x, lo_k, up_k = np.empty(28), np.empty(7), np.empty(56), np.empty(14), np.empty(14)
         assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
                     ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
-                    qp._params, P_x, g_k, A_x, lo_k, up_k)
+                    qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
         np.testing.assert_allclose(P_x, P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))], rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(A_x.reshape(7, 8)[:, :7].T, A[:7], rtol=1e-12)
