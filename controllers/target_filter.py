@@ -32,6 +32,8 @@ class FilterConfig:
     reset_gate: squared Mahalanobis distance of an innovation treated as a jump.
     reset_after: consecutive gated measurements, each agreeing with the previous, before re-initialising.
     jump_agree_m: how close consecutive gated measurements must be to count as one new position (a jump), m.
+    frozen_gate: gate bit-identical repeats (a noisy sensor never repeats); switch it off for a noise-free
+        simulated sensor, whose measurements of a static target repeat legitimately.
     """
 
     dt_s: float = 0.01
@@ -39,9 +41,10 @@ class FilterConfig:
     meas_noise_m: float = 0.002
     accel_noise_m_s2: float = 2.0
     init_vel_std_m_s: float = 0.5
-    reset_gate: float = 60.0
+    reset_gate: float = 40.0
     reset_after: int = 2
     jump_agree_m: float = 0.016
+    frozen_gate: bool = True
 
     def __post_init__(self) -> None:
         if self.model not in ("cv", "ca"):
@@ -111,7 +114,7 @@ class TargetFilter:
         if z.shape != (3,) or not np.all(np.isfinite(z)):
             self.gated_nonfinite += 1
             return None
-        if self._last_z is not None and np.array_equal(z, self._last_z):
+        if self.config.frozen_gate and self._last_z is not None and np.array_equal(z, self._last_z):
             self.gated_frozen += 1
             return None
         self._last_z = z

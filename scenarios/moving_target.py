@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.retarget import RULES, RetargetConfig
+from controllers.target_filter import FilterConfig
 from mmact_ctrl.config import MODES, StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
@@ -122,6 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--latency-ms", type=_latency, default=200.0,
                    help="inference latency: a chunk observed at t0 becomes active at t0 + latency; 'measured' uses each "
                         "chunk's measured inference time")
+    g.add_argument("--chunk-timeout-s", type=_number(float, "--chunk-timeout-s", 0, False), default=2.5,
+                   help="stale-chunk watchdog: when no valid chunk has arrived for this long, or the active chunk has "
+                        "run out, the reference brakes to rest within the smoother's limits and holds (counted)")
+    g.add_argument("--splice-radius-m", type=_number(float, "--splice-radius-m", 0, False), default=0.1,
+                   help="a chunk whose position when it becomes active is farther than this from the reference being "
+                        "executed is rejected and counted; the previous chunk keeps running")
     g.add_argument("--bins", type=_number(int, "--bins", 0), default=2048,
                    help="action bins per dimension of the tokenizer (0 = no quantization)")
     g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=16, help="waypoints per chunk (H)")
@@ -165,6 +172,9 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         duration_s=args.duration_s,
         receding_k=args.receding_k,
         ensemble_decay_per_s=args.ensemble_decay,
+        chunk_timeout_s=args.chunk_timeout_s,
+        splice_radius_m=args.splice_radius_m,
+        filter=FilterConfig(frozen_gate=args.noise_m > 0),  # a noise-free sensor repeats itself legitimately
     )
 
 

@@ -11,7 +11,7 @@ Kinds (``TargetSpec.kind``):
   bounces), reflecting at the walls; precomputed on a 10 ms grid up to ``horizon_s`` and linearly
   interpolated (so the speed is exact on every grid segment).
 - ``jump``: a static point that teleports by ``jump_dist_m`` in a random direction (kept inside the
-  box), first at a random time in [1.0, 2.0] s, then every ``jump_period_s`` up to ``horizon_s``.
+  box; horizontal in a flat workspace, the policy's plane), first at a random time in [1.0, 2.0] s, then every ``jump_period_s`` up to ``horizon_s``.
 
 Start points are drawn at least ``min_start_dist_m`` away from ``avoid_pos_m`` (by default the home
 TCP position of the Panda scene), so an episode is not solved at t = 0.
@@ -92,9 +92,11 @@ class TargetSpec:
         if self.kind == "circle" and np.any(2 * self.circle_radius_m > (high - low)[:2]):
             raise ValueError(f"TargetSpec.circle_radius_m={self.circle_radius_m!r} does not fit in the workspace "
                              f"(x, y extents {(high - low)[:2].tolist()} m)")
-        if self.kind == "jump" and self.jump_dist_m > float(np.min(high - low)):
+        # a flat workspace (the objects on one plane) jumps within the plane: only its x, y extents count
+        extents = (high - low)[:2] if high[2] - low[2] < PLANAR_EXTENT_M else high - low
+        if self.kind == "jump" and self.jump_dist_m > float(np.min(extents)):
             raise ValueError(f"TargetSpec.jump_dist_m={self.jump_dist_m!r} exceeds the smallest workspace extent "
-                             f"{float(np.min(high - low))} m")
+                             f"{float(np.min(extents))} m")
 
     @property
     def low(self) -> np.ndarray:
@@ -300,14 +302,20 @@ def _jump(spec: TargetSpec, rng: np.random.Generator, low: np.ndarray, high: np.
     times = tuple(float(t) for t in np.arange(first, spec.horizon_s, spec.jump_period_s))
     points = [_start_point(spec, rng, low, high)]
     centre = 0.5 * (low + high)
+    flat = high[2] - low[2] < PLANAR_EXTENT_M  # objects on one plane: jump within it
     for _ in times:
         p = points[-1]
         for _ in range(_MAX_TRIES):
-            q = p + spec.jump_dist_m * _random_unit(rng)
+            u = _random_unit(rng)
+            if flat:
+                u[2] = 0.0
+                u /= max(np.linalg.norm(u), 1e-12)
+            q = p + spec.jump_dist_m * u
             if np.all(q >= low) and np.all(q <= high):
                 break
         else:  # pragma: no cover - practically unreachable: the box is wider than jump_dist_m
             d = centre - p
+            d[2] = 0.0 if flat else d[2]
             q = p + spec.jump_dist_m * d / np.linalg.norm(d)
         points.append(q)
     return JumpMotion(points_m=np.asarray(points), jump_times_s=times)
