@@ -86,6 +86,11 @@ class TargetFilter:
         self._gated = 0
         self._last_z: np.ndarray | None = None
         self._last_gated: np.ndarray | None = None
+        self._gated_since_s = 0.0
+        #: the last confirmed jump: when its first measurement arrived, when the filter re-initialised, and where
+        self.jump_started_s: float | None = None
+        self.reset_at_s: float | None = None
+        self.reset_pos_m: np.ndarray | None = None
 
     @property
     def gated(self) -> int:
@@ -150,10 +155,14 @@ class TargetFilter:
         if d2 > self.config.reset_gate:
             agrees = self._last_gated is not None and np.linalg.norm(z_m - self._last_gated) <= self.config.jump_agree_m
             self._gated = self._gated + 1 if (agrees or self._gated == 0) else 1
+            if self._gated == 1:
+                self._gated_since_s = t_s
             self._last_gated = z_m
             if self._gated >= self.config.reset_after:
                 self.resets += 1
+                self.jump_started_s, self.reset_at_s = self._gated_since_s, t_s
                 self._init_on(t_s, z_m)
+                self.reset_pos_m = z_m.copy()
                 return "reset"
             self.gated_outlier += 1
             return "outlier"
@@ -162,6 +171,18 @@ class TargetFilter:
         self.kf.update(z_m)
         self.fused += 1
         return "fused"
+
+    def estimate_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:
+        """The best estimate of where the target was at an observation time ``t0_s``, given what is known now.
+
+        ``recorded_m`` is the estimate taken at ``t0_s``. If a jump confirmed since then had already begun at
+        ``t0_s`` (its first measurement arrived at or before it), the recorded estimate predates the filter's
+        knowledge of a jump the observation already saw: the post-jump position is returned instead (a chunk
+        planned on the new position must not be shifted by the jump a second time)."""
+        if (recorded_m is None or self.jump_started_s is None or self.reset_at_s is None
+                or not (self.jump_started_s - 0.5 * self.config.dt_s <= t0_s < self.reset_at_s)):
+            return recorded_m
+        return self.reset_pos_m.copy()
 
     @property
     def pos_m(self) -> np.ndarray:

@@ -71,6 +71,7 @@ class HybridController:
         self._hold_pos = np.zeros(3)
         self._hold_rotvec = np.zeros(3)
         self._gripper_m = GRIPPER_OPEN_M
+        self._smoothed_pos: np.ndarray | None = None
         self.terms: RobotTerms | None = None
         self.stop: StopTrajectory | None = None  # the watchdog's braking reference while no valid chunk covers now
         self.watchdog_stops = 0
@@ -87,6 +88,7 @@ class HybridController:
         self._hold_pos = pos
         self._hold_rotvec = rotvec_from_rot(rot, self.rot_nominal)
         self._gripper_m = GRIPPER_OPEN_M
+        self._smoothed_pos = None
         self.smoother.reset(pos, self._hold_rotvec)
         self.filter = TargetFilter(self.filter.config)
         tau_start = np.array(self.model.terms(q, dq).h)
@@ -122,12 +124,34 @@ class HybridController:
     def activate(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> None:
         """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency); ends a watchdog stop."""
         self.stop = None
+        target_at_obs_m = self.filter.estimate_at_observation(chunk.t0_s, target_at_obs_m)
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
         # snap's blend ends at the last waypoint that will actually run: the next chunk is due one replan period on
         self._blend_end_s = min(self.active.t_last_s, t_s + 1.0 / self.config.replan_hz)
         if self._ensemble_mode:
             self.ensemble = [c for c in self.ensemble if c.t_last_s > t_s] + [self.active]
+
+    def executed_position(self, t_s: float) -> np.ndarray:
+        """The reference position (3,) m being executed at ``t_s``: after Ruckig in hybrid (where a jump of the raw
+        reference, e.g. retargeting onto a target that jumped, is absorbed and smoothed away), the raw reference
+        otherwise."""
+        if self.hybrid and self.config.use_ruckig and self._smoothed_pos is not None:
+            return self._smoothed_pos
+        return self.reference(t_s)[0]
+
+    def start_position(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> np.ndarray:
+        """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, retargeting
+        included (what the splice check compares with the reference being executed)."""
+        target_at_obs_m = self.filter.estimate_at_observation(chunk.t0_s, target_at_obs_m)
+        ref = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
+        pos = ref.sample(t_s)[0][:3]
+        if self.hybrid and self.filter.initialized and trusted(self.config.retarget, ref.aim_pos_m, target_at_obs_m):
+            offset, _ = retarget_offset(self.config.retarget, t_s, ref.aim_pos_m, target_at_obs_m,
+                                        self.filter.predict_pos(t_s), self.filter.vel_m_s, t_s,
+                                        min(ref.t_last_s, t_s + 1.0 / self.config.replan_hz))
+            pos = pos + offset
+        return pos
 
     def _ensemble_sample(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """ACT temporal ensembling: weighted mean of every chunk covering ``t_s``, oldest weighing most."""
@@ -234,6 +258,7 @@ class HybridController:
         pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
         if self.hybrid and self.config.use_ruckig:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
+            self._smoothed_pos = pos
         else:
             acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)
         return pos, vel, acc, rot_from_rotvec(rotvec, self.rot_nominal), ang_vel, ang_acc, gripper

@@ -63,6 +63,7 @@ class EpisodeLog:
     perception_errors: int = 0
     missed_ticks: int = 0
     rate_clamps: int = 0
+    qp_rescues: int = 0
     plan_resyncs: int = 0
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)
@@ -221,7 +222,8 @@ def run_episode(
                 next_plan_s = t + replan_period_s if mode == "receding" else next_plan_s + replan_period_s
         tick0 = time.perf_counter()
         for entry in intake.due(t + eps):
-            if intake.admit(entry, t, controller.active, controller.reference(t)[0]):
+            start = controller.start_position(entry.chunk, t, entry.target_at_obs_m)
+            if intake.admit(entry, t, controller.active, controller.executed_position(t), start):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
                 log.chunk_active_s.append(t)
                 last_arrival_s = t
@@ -266,6 +268,7 @@ def run_episode(
         log.truncate(n_done)
     log.qp_failures = controller.qp.failures
     log.rate_clamps = controller.qp.rate_clamps
+    log.qp_rescues = controller.qp.rescues
     log.smoother_failures = controller.smoother.failures
     if controller.mpc is not None:
         log.mpc_failures = controller.mpc.failures + controller.mpc.late
