@@ -30,10 +30,12 @@ If OSQP returns neither "solved" nor "solved inaccurate" (the latter is counted 
 ``inaccurate``), or a non-finite solution, the same QP goes to DAQP (dual active set; counted in
 ``rescues`` when it solves it): ADMM can stall for hundreds of iterations when the torque-rate rows
 and several joint bounds are active together, where an active-set method is exact in a few
-iterations. Only if both fail does the controller fall back (:meth:`TaskSpaceQP.fallback`)
-and counts the failure in ``failures``: the torque ramps toward gravity compensation with joint
-damping, the acceleration that asks for limited to the acceleration box and to the jerk limit from
-the last commanded acceleration, and the torque step to the same rate limit. A solved torque that
+iterations. If the rows cannot all hold (a state the rate limit does not let the controller leave in
+one tick), DAQP solves it again with the velocity/position viability bounds soft (the acceleration
+and jerk box still hard), and if need be with every acceleration row soft: the torque rows, the
+robot's necessary condition, always hold. Only if that fails too does the controller fall back
+(:meth:`TaskSpaceQP.fallback`, counted in ``failures``): the torque ramps toward gravity
+compensation with joint damping, projected (DAQP again) onto the same rows. A solved torque that
 the solver's tolerance left outside the rate limit is clamped onto it (counted in ``rate_clamps``).
 """
 
@@ -76,6 +78,9 @@ class QPConfig:
         rate_margin: fraction of the torque-rate limit the QP may use per step (0 < rate_margin <= 1).
         a_margin: fraction of the joint acceleration limits the QP may use.
         jerk_margin: fraction of the joint jerk limits the commanded acceleration may use.
+        pos_err_max_m: the TCP position error of the PD term is saturated at this length, m: a reference that
+            jumped far away (a stale plan dropped, a chunk switch) is approached at about
+            ``kp_pos / kd_pos * pos_err_max_m`` (1 m/s), not at the 7 x error per second of a raw PD step.
     """
 
     kp_pos: float = 400.0
@@ -100,6 +105,7 @@ class QPConfig:
     rate_margin: float = 0.95
     a_margin: float = 0.97
     jerk_margin: float = 0.9
+    pos_err_max_m: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("kp_pos", "kd_pos", "kp_ori", "kd_ori", "kp_post", "kd_post", "w_pos", "w_ori", "w_post", "w_reg"):
@@ -111,6 +117,8 @@ class QPConfig:
             raise ValueError(f"QPConfig.v_margin must be in (0, 1], got {self.v_margin}")
         if not self.dt_s > 0:
             raise ValueError(f"QPConfig.dt_s must be > 0, got {self.dt_s}")
+        if not self.pos_err_max_m > 0:
+            raise ValueError(f"QPConfig.pos_err_max_m must be > 0, got {self.pos_err_max_m}")
         if not self.dtau_max_nm_s > 0:
             raise ValueError(f"QPConfig.dtau_max_nm_s must be > 0, got {self.dtau_max_nm_s}")
         for name in ("rate_margin", "a_margin", "jerk_margin"):
@@ -168,7 +176,8 @@ class TaskSpaceQP:
         b = self._bounds
         self._params = qp_params(self._kp6, self._kd6, self._w6, config.kp_post, config.kd_post, config.w_post,
                                  config.w_post + config.w_reg, b.q_hi, b.q_lo, b.v_max, b.a_max, self._tau_lim,
-                                 config.dt_s, config.brake_horizon_s, self.dtau_step_nm, self._ddq_step)
+                                 config.dt_s, config.brake_horizon_s, self.dtau_step_nm, self._ddq_step,
+                                 config.pos_err_max_m)
         self._P_x = np.empty(len(self._p_idx))
         self._g = np.empty(n)
         self._A_x = np.empty(len(self._a_idx))
@@ -196,6 +205,8 @@ class TaskSpaceQP:
         self._P_dense = np.zeros((n, n))
         self._A_dense = np.vstack([np.zeros((n, n)), np.eye(n)])
         self._sense = np.zeros(2 * n, dtype=c_int)
+        self._sense_viability_soft = np.array([0] * (2 * n) + [8] * n, dtype=c_int)  # DAQP: 8 = soft constraint
+        self._sense_all_soft = np.array([0] * n + [8] * (2 * n), dtype=c_int)
         self._ok_status = (int(osqp.SolverStatus.OSQP_SOLVED), int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE))
         self._inaccurate_status = int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
         self.inaccurate = 0
@@ -220,11 +231,11 @@ class TaskSpaceQP:
         self.failures = self.solves = self.inaccurate = self.rate_clamps = self.rescues = 0
         self.last_ok = True
 
-    def hold(self, terms: RobotTerms, tau_held_nm: np.ndarray) -> np.ndarray:
-        """A control tick whose command did not reach the robot: the robot re-applies ``tau_held_nm``. Records
-        it as the last torque and returns (and records) the joint acceleration it commands in this state."""
+    def hold(self, tau_held_nm: np.ndarray) -> np.ndarray:
+        """A control tick whose command did not reach the robot: the robot re-applies ``tau_held_nm``, which becomes
+        the last torque (the next command's rate is measured against it). No new command was sent, so the last
+        commanded acceleration stands (the jerk of the next command is measured against it); it is returned."""
         self.tau_last = np.asarray(tau_held_nm, dtype=np.float64).copy()
-        self.last_ddq = commanded_accel(terms, self.tau_last, self.last_ddq)
         return self.last_ddq
 
     def _ensure_started(self, terms: RobotTerms) -> None:
@@ -236,7 +247,11 @@ class TaskSpaceQP:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The QP of this tick in dense form: ``min 0.5 x'Px + g'x  s.t.  lower <= A x <= upper``."""
         c = self.config
-        e6 = np.concatenate((ref.pos_m - terms.pos_m, orientation_error(ref.rot, terms.rot)))
+        e_pos = ref.pos_m - terms.pos_m
+        e_norm = float(np.linalg.norm(e_pos))
+        if e_norm > c.pos_err_max_m:
+            e_pos = e_pos * (c.pos_err_max_m / e_norm)
+        e6 = np.concatenate((e_pos, orientation_error(ref.rot, terms.rot)))
         v6 = np.concatenate((ref.vel_m_s, ref.ang_vel_rad_s))
         a6 = np.concatenate((ref.acc_m_s2, ref.ang_acc_rad_s2))
         a_des = a6 + self._kp6 * e6 + self._kd6 * (v6 - terms.vel)
@@ -245,17 +260,25 @@ class TaskSpaceQP:
         WJ = J * self._w6[:, None]
         P = J.T @ WJ + self._p_diag
         g = (terms.dJv - a_des) @ WJ - c.w_post * ddq_post
+        lower, upper = self.constraint_bounds(terms, q_rad, dq_rad_s)
+        self._lower[:], self._upper[:] = lower, upper
+        self._a_full[:self.n] = terms.M
+        return P, g, self._a_full, self._lower, self._upper
+
+    def constraint_bounds(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` (14,) of ``lower <= [M; I] ddq <= upper`` in this state: the torque rows (effort and
+        rate around ``tau_last``, minus h) and the acceleration rows (acceleration, jerk-aware velocity and position
+        viability, intersected with the jerk box around ``last_ddq``); numpy, the reference of the kernel."""
         n = self.n
         self._ensure_started(terms)
-        j_eff = np.minimum(self._ddq_step, 0.5 * self.dtau_step_nm / np.diag(terms.M)) / c.dt_s
-        lb, ub = self._bounds(q_rad, dq_rad_s, j_eff)
+        lb, ub = self._bounds(q_rad, dq_rad_s, self._j_eff(terms))
         jerk_box(self.last_ddq, self._ddq_step, lb, ub)
-        self._lower[n:], self._upper[n:] = lb, ub
-        rate_box(self.tau_last, self._tau_lim, self.dtau_step_nm, self._lower[:n], self._upper[:n])
-        self._lower[:n] -= terms.h
-        self._upper[:n] -= terms.h
-        self._a_full[:n] = terms.M
-        return P, g, self._a_full, self._lower, self._upper
+        lower, upper = np.empty(2 * n), np.empty(2 * n)
+        lower[n:], upper[n:] = lb, ub
+        rate_box(self.tau_last, self._tau_lim, self.dtau_step_nm, lower[:n], upper[:n])
+        lower[:n] -= terms.h
+        upper[:n] -= terms.h
+        return lower, upper
 
     def solve(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> np.ndarray:
         """Torques (7,) N*m that track ``ref`` within limits, the torque rate included; a safe fallback
@@ -274,7 +297,7 @@ class TaskSpaceQP:
         tau = np.empty(self.n)
         ok = status in self._ok_status and torque(terms.M, terms.h, ddq, tau)  # tau = M ddq + h, all finite
         if not ok:  # ADMM stalls when many limits are active at once: the exact active-set solver takes over
-            ddq = self._rescue()
+            ddq = self._rescue(terms, q_rad, dq_rad_s)
             ok = ddq is not None and torque(terms.M, terms.h, ddq, tau)
             self.rescues += ok
         elif status == self._inaccurate_status:
@@ -287,51 +310,90 @@ class TaskSpaceQP:
             self.last_ddq = ddq
             self.tau_last = tau
             return tau  # not clipped to the effort limits: the safety monitor checks what is sent
-        return self.fallback(terms, dq_rad_s)
+        return self.fallback(terms, q_rad, dq_rad_s)
 
-    def _rescue(self) -> np.ndarray | None:
-        """The same QP (the values just assembled) solved by DAQP, a dual active-set solver: exact where OSQP's
-        ADMM ran out of iterations (typically with the torque-rate rows and several joint bounds active at once;
-        ~16 us). Returns ddq, or None when DAQP finds no solution either."""
+    def _daqp(self, P: np.ndarray, g: np.ndarray, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray,
+              lower: np.ndarray, upper: np.ndarray) -> np.ndarray | None:
+        """``min 0.5 x'Px + g'x`` over ddq with DAQP (dual active set) under the rows of this tick, in three levels:
+
+        1. every row hard: ``lower <= [M; I] ddq <= upper`` (the rows OSQP had);
+        2. if infeasible (the joint bounds and the torque-rate box do not meet: a state the rate limit does not let
+           the controller leave in one tick): the torque rows and the acceleration and jerk box hard, the velocity
+           and position viability bounds soft (DAQP's slack penalty, 1e6);
+        3. if still infeasible: only the torque rows hard, every acceleration row soft.
+
+        The torque rows, the robot's necessary condition, hold at every level. Returns ddq or None."""
+        n = self.n
+        candidates = [(self._A_dense, upper, lower, self._sense)]
+        box_lo, box_hi = self._accel_jerk_box()
+        v_lo, v_hi = self._bounds(q_rad, dq_rad_s, self._j_eff(terms))
+        A3 = np.vstack([terms.M, np.eye(n), np.eye(n)])
+        up3 = np.concatenate([upper[:n], box_hi, v_hi])
+        lo3 = np.concatenate([lower[:n], box_lo, v_lo])
+        candidates += [(A3, up3, lo3, self._sense_viability_soft), (A3, up3, lo3, self._sense_all_soft)]
+        for A, up, lo, sense in candidates:
+            try:
+                x, _, flag, _ = daqp.solve(P, g, A, up, lo, sense)
+            except Exception:  # noqa: BLE001 - a solver error means: no solution
+                return None
+            x = np.asarray(x, dtype=np.float64)
+            if flag in (1, 2) and x.shape == (n,) and np.all(np.isfinite(x)):
+                return x
+        return None
+
+    def _j_eff(self, terms: RobotTerms) -> np.ndarray:
+        """How fast each joint's commanded acceleration can change, rad/s^3 (``tick_kernels.effective_jerk``)."""
+        return np.minimum(self._ddq_step, 0.5 * self.dtau_step_nm / np.diag(terms.M)) / self.config.dt_s
+
+    def _accel_jerk_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The acceleration box intersected with the jerk box around ``last_ddq`` (nearest point when apart)."""
+        a = self._bounds.a_max
+        lo, hi = -a.copy(), a.copy()
+        jerk_box(self.last_ddq, self._ddq_step, lo, hi)
+        return lo, hi
+
+    def _rescue(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> np.ndarray | None:
+        """The QP just assembled, solved by DAQP where OSQP's ADMM ran out of iterations (typically with the
+        torque-rate rows and several joint bounds active at once; ~16 us). Returns ddq or None."""
         n = self.n
         P = self._P_dense
         P.T.flat[self._p_idx] = self._P_x  # upper triangle, column-major
         P = np.triu(P) + np.triu(P, 1).T
         self._A_dense[:n] = self._A_x.reshape(n, n + 1)[:, :n].T
-        try:
-            x, _, flag, _ = daqp.solve(P, self._g, self._A_dense, self._u, self._l, self._sense)
-        except Exception:  # noqa: BLE001 - a solver error means: fall back
-            return None
-        x = np.asarray(x, dtype=np.float64)
-        return x if flag in (1, 2) and x.shape == (n,) and np.all(np.isfinite(x)) else None
+        return self._daqp(P, self._g, terms, q_rad, dq_rad_s, self._l, self._u)
 
-    def fallback(self, terms: RobotTerms, dq_rad_s: np.ndarray) -> np.ndarray:
+    def fallback(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> np.ndarray:
         """The torque of a tick the QP could not solve (counted in ``failures``): see :meth:`fallback_torque`."""
         self.last_ok = False
         self.failures += 1
         self._ensure_started(terms)
-        tau = self.fallback_torque(terms, dq_rad_s)
+        tau = self.fallback_torque(terms, q_rad, dq_rad_s)
         self.last_ddq = commanded_accel(terms, tau, self.last_ddq)
         self.tau_last = tau
         return tau
 
-    def fallback_torque(self, terms: RobotTerms, dq_rad_s: np.ndarray) -> np.ndarray:
-        """Ramp toward gravity/Coriolis compensation with joint damping (``h - fallback_kd dq``), within the
-        robot's conditions: the acceleration it asks for is kept inside the acceleration box and within the jerk
-        limit of the last commanded acceleration, the torque within the effort limits and the rate limit of the
-        last torque. With non-finite model terms the last torque is held (zero rate)."""
+    def fallback_torque(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> np.ndarray:
+        """Ramp toward gravity/Coriolis compensation with joint damping (``h - fallback_kd dq``) within the robot's
+        conditions: the acceleration nearest (DAQP) to the one that torque asks for, with the torque rows (effort,
+        rate from the last torque) hard and the acceleration rows (acceleration, jerk, viability) soft. When even
+        that has no solution, or the model terms are not finite, the last torque is held (zero rate)."""
         self._ensure_started(terms)
         tau_last = self.tau_last
         M, h = terms.M, terms.h
-        if not (np.all(np.isfinite(M)) and np.all(np.isfinite(h)) and np.all(np.isfinite(dq_rad_s))):
+        if not all(np.all(np.isfinite(x)) for x in (M, h, q_rad, dq_rad_s)):
             return tau_last.copy()
-        a_box = self._bounds.a_max
-        ddq_goal = np.clip(np.linalg.solve(M, -self.config.fallback_kd * dq_rad_s), -a_box, a_box)
-        ddq = self.last_ddq + np.clip(ddq_goal - self.last_ddq, -self._ddq_step, self._ddq_step)
+        try:
+            ddq_goal = np.linalg.solve(M, -self.config.fallback_kd * np.asarray(dq_rad_s, dtype=float))
+        except np.linalg.LinAlgError:
+            return tau_last.copy()
+        lower, upper = self.constraint_bounds(terms, q_rad, dq_rad_s)
+        self._A_dense[:self.n] = M
+        ddq = self._daqp(np.eye(self.n), -ddq_goal, terms, q_rad, dq_rad_s, lower, upper)
+        if ddq is None:
+            return tau_last.copy()
         tau = M @ ddq + h
-        lo, hi = np.empty(self.n), np.empty(self.n)
-        rate_box(tau_last, self._tau_lim, self.dtau_step_nm, lo, hi)
-        return np.clip(tau, lo, hi)
+        clamp_rate(tau, tau_last, self.dtau_hard_nm)
+        return tau if np.all(np.isfinite(tau)) else tau_last.copy()
 
 
 def commanded_accel(terms: RobotTerms, tau_nm: np.ndarray, default: np.ndarray) -> np.ndarray:

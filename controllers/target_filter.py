@@ -34,6 +34,9 @@ class FilterConfig:
     jump_agree_m: how close consecutive gated measurements must be to count as one new position (a jump), m.
     frozen_gate: gate bit-identical repeats (a noisy sensor never repeats); switch it off for a noise-free
         simulated sensor, whose measurements of a static target repeat legitimately.
+    coast_s: after this long without a fused measurement the velocity (and acceleration) estimate is dropped:
+        the target is taken to stand where it was last estimated instead of being extrapolated for seconds
+        (a frozen or blinded sensor), s.
     """
 
     dt_s: float = 0.01
@@ -45,11 +48,13 @@ class FilterConfig:
     reset_after: int = 2
     jump_agree_m: float = 0.016
     frozen_gate: bool = True
+    coast_s: float = 0.5
 
     def __post_init__(self) -> None:
         if self.model not in ("cv", "ca"):
             raise ValueError(f"FilterConfig.model must be 'cv' or 'ca', got {self.model!r}")
-        for name in ("dt_s", "meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "reset_gate", "jump_agree_m"):
+        for name in ("dt_s", "meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "reset_gate", "jump_agree_m",
+                     "coast_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"FilterConfig.{name} must be > 0, got {getattr(self, name)}")
         if self.reset_after < 1:
@@ -88,6 +93,8 @@ class TargetFilter:
         self._last_gated: np.ndarray | None = None
         self._gated_since_s = 0.0
         #: the last confirmed jump: when its first measurement arrived, when the filter re-initialised, and where
+        self.coasts = 0
+        self._last_fused_s = 0.0
         self.jump_started_s: float | None = None
         self.reset_at_s: float | None = None
         self.reset_pos_m: np.ndarray | None = None
@@ -108,6 +115,7 @@ class TargetFilter:
         self.initialized = True
         self._gated = 0
         self._last_gated = None
+        self._last_fused_s = t_s
 
     def _screen(self, z_m) -> np.ndarray | None:
         """The measurement as a (3,) array if it passes the non-finite and frozen gates, else None (counted)."""
@@ -136,16 +144,14 @@ class TargetFilter:
             if z_m is None:
                 gated = "nonfinite" if self.gated_nonfinite > before else "frozen"
                 if self.initialized:
-                    self.kf.predict()
-                    self.t_s = t_s
+                    self._predict(t_s)
                 return gated
         if not self.initialized:
             if z_m is None:
                 return "missed"
             self._init_on(t_s, z_m)
             return "init"
-        self.kf.predict()
-        self.t_s = t_s
+        self._predict(t_s)
         if z_m is None:
             self.missed += 1
             return "missed"
@@ -170,7 +176,16 @@ class TargetFilter:
         self._last_gated = None
         self.kf.update(z_m)
         self.fused += 1
+        self._last_fused_s = t_s
         return "fused"
+
+    def _predict(self, t_s: float) -> None:
+        """One period ahead; past ``coast_s`` without a fused measurement the motion estimate is dropped (once)."""
+        self.kf.predict()
+        self.t_s = t_s
+        if t_s - self._last_fused_s > self.config.coast_s and np.any(self.kf.x[3:]):
+            self.kf.x[3:] = 0.0
+            self.coasts += 1
 
     def estimate_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:
         """The best estimate of where the target was at an observation time ``t0_s``, given what is known now.

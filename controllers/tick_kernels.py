@@ -23,15 +23,17 @@ _KP_POST, _KD_POST, _W_POST, _P_DIAG = 18, 19, 20, 21
 _Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = 22, 29, 36, 43, 50
 _DT, _INV_H, _DTAU = 57, 58, 59
 _DDQ_STEP = 60
-N_PARAMS = 67
+_E_MAX = 67
+N_PARAMS = 68
 
 
 def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s,
-              dtau_step_nm, ddq_step_rad_s2):
+              dtau_step_nm, ddq_step_rad_s2, pos_err_max_m):
     """Pack the QP's constants into the flat vector :func:`assemble_qp` reads.
 
     ``dtau_step_nm``: the largest torque change per control step (rate limit x dt, with margin);
-    ``ddq_step_rad_s2`` (7,): the largest change of the commanded joint acceleration per step (jerk limit x dt)."""
+    ``ddq_step_rad_s2`` (7,): the largest change of the commanded joint acceleration per step (jerk limit x dt);
+    ``pos_err_max_m``: the TCP position error the PD term sees is saturated at this length."""
     p = np.empty(N_PARAMS)
     p[_KP6:_KP6 + 6], p[_KD6:_KD6 + 6], p[_W6:_W6 + 6] = kp6, kd6, w6
     p[_KP_POST], p[_KD_POST], p[_W_POST], p[_P_DIAG] = kp_post, kd_post, w_post, p_diag
@@ -39,6 +41,7 @@ def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max,
     p[_A_MAX:_A_MAX + 7], p[_TAU_LIM:_TAU_LIM + 7] = a_max, tau_lim
     p[_DT], p[_INV_H], p[_DTAU] = dt_s, 1.0 / brake_horizon_s, dtau_step_nm
     p[_DDQ_STEP:_DDQ_STEP + 7] = ddq_step_rad_s2
+    p[_E_MAX] = pos_err_max_m
     return p
 
 
@@ -183,8 +186,11 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
     e_rot = np.empty(3)
     log3(R, e_rot)
     r = np.empty(6)  # dJv - a_des, weighted below
+    # the position error is saturated at pos_err_max: a far reference is approached at a bounded speed
+    en = math.sqrt((ref_pos[0] - pos[0]) ** 2 + (ref_pos[1] - pos[1]) ** 2 + (ref_pos[2] - pos[2]) ** 2)
+    e_scale = params[_E_MAX] / en if en > params[_E_MAX] else 1.0
     for i in range(3):
-        e, v, a = ref_pos[i] - pos[i], ref_vel[i] - vel[i], ref_acc[i]
+        e, v, a = (ref_pos[i] - pos[i]) * e_scale, ref_vel[i] - vel[i], ref_acc[i]
         r[i] = dJv[i] - (a + params[_KP6 + i] * e + params[_KD6 + i] * v)
         e, v, a = e_rot[i], ref_w[i] - vel[3 + i], ref_dw[i]
         r[3 + i] = dJv[3 + i] - (a + params[_KP6 + 3 + i] * e + params[_KD6 + 3 + i] * v)

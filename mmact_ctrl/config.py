@@ -51,6 +51,8 @@ class StackConfig:
             farther than this from it (then from the measured state), m and m/s.
         abort_after_missed_ticks: this many missed control ticks in a row abort the episode, as on the Panda
             (``communication_constraints_violation``).
+        mpc_keep_plan_s: hybrid with MPC: after a failed or late solve the last plan is kept this long after the
+            last good solve, then the QP tracks the smoothed reference directly until a solve succeeds, s.
     """
 
     mode: str = "hybrid"
@@ -71,6 +73,7 @@ class StackConfig:
     plan_resync_m: float = 0.02
     plan_resync_m_s: float = 0.25
     abort_after_missed_ticks: int = 20
+    mpc_keep_plan_s: float = 0.1
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -102,6 +105,9 @@ class StackConfig:
         if not (self.plan_resync_m > 0 and self.plan_resync_m_s > 0):
             raise ValueError(f"plan_resync_m and plan_resync_m_s must be > 0, got {self.plan_resync_m}, "
                              f"{self.plan_resync_m_s}")
+        if not 0 < self.mpc_keep_plan_s <= self.mpc.horizon_steps * self.mpc.dt_s:
+            raise ValueError(f"mpc_keep_plan_s must be in (0, the MPC horizon {self.mpc.horizon_steps * self.mpc.dt_s:g} s], "
+                             f"got {self.mpc_keep_plan_s}")
         if self.abort_after_missed_ticks < 1:
             raise ValueError(f"abort_after_missed_ticks must be >= 1, got {self.abort_after_missed_ticks}")
         if self.latency_ms / 1000.0 >= self.duration_s:

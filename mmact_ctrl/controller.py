@@ -76,6 +76,8 @@ class HybridController:
         self.stop: StopTrajectory | None = None  # the watchdog's braking reference while no valid chunk covers now
         self.watchdog_stops = 0
         self.plan_resyncs = 0  # MPC plans started from the measured state because the robot left the tracked one
+        self.mpc_bypass_ticks = 0  # ticks tracking the smoothed reference directly: no good MPC plan covered them
+        self._good_plan_end_s = 0.0
 
     # ---- episode -----------------------------------------------------------
     def reset(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None) -> np.ndarray:
@@ -96,6 +98,8 @@ class HybridController:
         self.stop = None
         self.watchdog_stops = 0
         self.plan_resyncs = 0
+        self.mpc_bypass_ticks = 0
+        self._good_plan_end_s = 0.0
         self._plan = None
         self._next_mpc_s = 0.0
         if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
@@ -268,22 +272,31 @@ class HybridController:
 
         Without MPC the reference is retargeted and Ruckig-smoothed every tick. With MPC the QP tracks
         the MPC plan, so retargeting and Ruckig run at the MPC's rate (their output is only read there;
-        Ruckig then steps with the MPC period), and every tick only samples the plan.
+        Ruckig then steps with the MPC period), and every tick only samples the plan. A failed or late MPC
+        solve keeps the last plan (re-timed by the MPC's own fallback) for ``config.mpc_keep_plan_s`` after
+        the last good solve; past that the QP tracks the smoothed reference directly (``mpc_bypass_ticks``):
+        a stale plan's linearized TCP prediction drifts from the real TCP and is not followed for long.
         """
         terms = self.model.terms(q_rad, dq_rad_s)
         self.terms = terms
         if self.use_mpc:
             if t_s >= self._next_mpc_s - 1e-9:
-                ref_pos, _, _, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
-                self._slow_ref = (ref_pos, rot, ang_vel, ang_acc, gripper)
+                ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
+                self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
                 self._plan = self._solve_mpc(t_s, q_rad, dq_rad_s, terms, rot)
+                if self._plan.ok:
+                    self._good_plan_end_s = t_s + self.config.mpc_keep_plan_s
                 self._next_mpc_s = t_s + self._mpc_period_s
-            ref_pos, rot, ang_vel, ang_acc, gripper = self._slow_ref
+            t_slow, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._slow_ref
             plan = self._plan
-            q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
-            sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
-                             plan.ee_jacobian_lin, q_post, task)
-            pos, vel, acc = task[0], task[1], task[2]
+            if plan.ok or t_s < self._good_plan_end_s:
+                q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
+                sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2,
+                                 plan.ee_pos_m[0], plan.ee_jacobian_lin, q_post, task)
+                pos, vel, acc = task[0], task[1], task[2]
+            else:  # the MPC has failed past the last good plan's horizon: the QP tracks the smoothed reference
+                pos, vel, acc, q_post = ref_pos + ref_vel * (t_s - t_slow), ref_vel, ref_acc, self.q_post
+                self.mpc_bypass_ticks += 1
         else:
             pos, vel, acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
             ref_pos, q_post = pos, self.q_post
@@ -303,11 +316,11 @@ class HybridController:
 
     def missed_tick(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
         """A control tick whose command never reached the robot: the robot re-applies the last torque it received.
-        Nothing is planned; the QP records the held torque (the next command's rate is measured against it) and
-        the acceleration it commands in this state, for the safety monitor."""
+        Nothing is planned; the QP records the held torque (the next command's rate is measured against it); the
+        last commanded acceleration stands (no new command was sent)."""
         terms = self.model.terms(q_rad, dq_rad_s)
         self.terms = terms
         tau = self.qp.tau_last if self.qp.tau_last is not None else np.array(terms.h)
-        ddq = self.qp.hold(terms, tau)
+        ddq = self.qp.hold(tau)
         return TickOutput(tau_nm=self.qp.tau_last, gripper_m=self._gripper_m, ref_pos_m=np.full(3, np.nan),
                           ee_pos_m=terms.pos_m, ddq_cmd_rad_s2=ddq, tcp_vel_m_s=terms.vel[:3])

@@ -17,7 +17,8 @@
 - faults survived: ``rejected_chunks`` (and ``rejections`` per reason, ``mmact_ctrl.chunk_intake``),
   ``watchdog_stops``, ``gated_measurements`` (non-finite, frozen, outlier), ``missed_ticks``, ``aborts``
   (episodes the robot would have aborted: 20 missed ticks in a row), ``rate_clamps`` (solver-tolerance
-  corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``.
+  corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``, ``mpc_bypass_ticks`` (ticks with
+  no good MPC plan, tracking the smoothed reference directly).
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
@@ -70,7 +71,7 @@ SAFETY_KEYS: dict[str, str] = {
 }
 #: fault counters summed over episodes
 FAULT_KEYS: tuple[str, ...] = ("rejected_chunks", "watchdog_stops", "gated_measurements", "missed_ticks", "aborts",
-                               "rate_clamps", "qp_rescues", "plan_resyncs", "perception_errors")
+                               "rate_clamps", "qp_rescues", "plan_resyncs", "mpc_bypass_ticks", "perception_errors")
 
 
 def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
@@ -137,6 +138,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "rate_clamps": int(log.rate_clamps),
         "qp_rescues": int(log.qp_rescues),
         "plan_resyncs": int(log.plan_resyncs),
+        "mpc_bypass_ticks": int(log.mpc_bypass_ticks),
         "perception_errors": int(log.perception_errors),
         "qp_failures": int(log.qp_failures),
         "smoother_failures": int(log.smoother_failures),

@@ -446,7 +446,7 @@ def _qp_fail_burst(spec, world, source, controller, inj: Injection) -> None:
     def faulty_solve(terms, q_rad, dq_rad_s, ref):
         if done[0] < n_ticks and _now(world) >= start - _EPS_S:
             done[0] += 1
-            return qp.fallback(terms, dq_rad_s)
+            return qp.fallback(terms, q_rad, dq_rad_s)
         return solve(terms, q_rad, dq_rad_s, ref)
 
     qp.solve = faulty_solve

@@ -32,15 +32,6 @@ SEED = 0
 SOURCE_FAULTS = ("none", "source_raises", "nan_chunk", "garbage_tokens", "splice_offset", "source_silent_0.1s",
                  "source_silent_1.5s", "source_silent_3s", "latency_spike_10x")
 CASES = [(f, "hybrid") for f in FAULTS] + [(f, "open_loop") for f in SOURCE_FAULTS]
-#: cells where the suite found safety violations (commanded joint acceleration above the Panda's limit) in the
-#: loop/QP, not in the injection; reported, not fixed here. Non-strict: they pass once the loop is fixed.
-KNOWN_VIOLATIONS = {
-    ("qp_fail_burst", "hybrid"): "TaskSpaceQP.fallback: commanded acceleration above a_max (joints 6 and 2) while "
-                                 "the torque ramps at the rate limit",
-    ("missed_ticks_5", "hybrid"): "after the held torque the QP fails and its fallback exceeds a_max (joint 6)",
-    ("missed_ticks_19", "hybrid"): "after the held torque the QP fails and its fallback exceeds a_max (joint 6)",
-}
-
 _RESULTS: dict = {}
 
 
@@ -70,8 +61,7 @@ def episode(world, controllers, fault: str, mode: str):
 
 
 def _case(fault, mode):
-    marks = [pytest.mark.xfail(reason=KNOWN_VIOLATIONS[(fault, mode)], strict=False)] if (fault, mode) in KNOWN_VIOLATIONS else []
-    return pytest.param(fault, mode, marks=marks, id=f"{fault}-{mode}")
+    return pytest.param(fault, mode, id=f"{fault}-{mode}")
 
 
 def test_registry_names_are_the_public_contract():

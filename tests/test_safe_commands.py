@@ -180,3 +180,22 @@ def test_cli_rejects_bad_safety_switches_in_one_line(bad, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and bad[0] in err[0]
+
+
+def test_an_observation_that_already_saw_a_jump_is_not_shifted_by_it_twice():
+    """A chunk observed on the tick of the jump's first measurement (the filter still believes the old place)
+    gets the post-jump estimate at activation; one observed before the jump keeps the old one."""
+    kf = TargetFilter(FilterConfig())
+    rng = np.random.default_rng(1)
+    old, new = np.array([0.5, 0.0, 0.3]), np.array([0.5, 0.15, 0.3])
+    for k in range(100):
+        kf.step(0.01 * k, old + rng.normal(0, 0.002, 3))
+    recorded_before, recorded_at = kf.pos_m, None
+    for k in range(100, 103):
+        kf.step(0.01 * k, new + rng.normal(0, 0.002, 3))
+        if k == 100:
+            recorded_at = kf.pos_m  # the observation of t = 1.00 s: the gate held the jump back
+    assert kf.resets == 1 and np.linalg.norm(recorded_at - old) < 0.005
+    assert np.linalg.norm(kf.estimate_at_observation(1.0, recorded_at) - new) < 0.006
+    np.testing.assert_array_equal(kf.estimate_at_observation(0.98, recorded_before), recorded_before)
+    assert kf.estimate_at_observation(1.0, None) is None
