@@ -183,25 +183,8 @@ class TaskSpaceQP:
         self._A_x = np.empty(len(self._a_idx))
         self._l = np.empty(2 * n)
         self._u = np.empty(2 * n)
-        self._solver = osqp.OSQP()
-        self._solver.setup(
-            P=sp.csc_matrix(p_pattern),
-            q=np.zeros(n),
-            A=sp.csc_matrix(a_pattern),
-            l=-np.ones(2 * n),
-            u=np.ones(2 * n),
-            verbose=False,
-            warm_starting=True,
-            polishing=False,
-            eps_abs=config.eps,
-            eps_rel=config.eps,
-            max_iter=config.max_iter,
-            check_termination=5,
-            adaptive_rho_interval=25,  # a fixed interval keeps runs deterministic (0 = by setup time)
-        )
-        # The low-level solver object: the high-level wrapper's update()/solve() spend ~50 us per tick
-        # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
-        self._ext = self._solver._solver
+        self._p_pattern, self._a_pattern = p_pattern, a_pattern
+        self._setup_solver()
         self._P_dense = np.zeros((n, n))
         self._A_dense = np.vstack([np.zeros((n, n)), np.eye(n)])
         self._sense = np.zeros(2 * n, dtype=c_int)
@@ -220,9 +203,34 @@ class TaskSpaceQP:
         #: bias torque h of that first state, i.e. the robot holding itself as it does before a controller starts)
         self.tau_last: np.ndarray | None = None
 
+    def _setup_solver(self) -> None:
+        """(Re)build the OSQP problem on the fixed sparsity patterns (~0.3 ms): no warm start or adapted rho left."""
+        n, config = self.n, self.config
+        self._solver = osqp.OSQP()
+        self._solver.setup(
+            P=sp.csc_matrix(self._p_pattern),
+            q=np.zeros(n),
+            A=sp.csc_matrix(self._a_pattern),
+            l=-np.ones(2 * n),
+            u=np.ones(2 * n),
+            verbose=False,
+            warm_starting=True,
+            polishing=False,
+            eps_abs=config.eps,
+            eps_rel=config.eps,
+            max_iter=config.max_iter,
+            check_termination=5,
+            adaptive_rho_interval=25,  # a fixed interval keeps runs deterministic (0 = by setup time)
+        )
+        # The low-level solver object: the high-level wrapper's update()/solve() spend ~50 us per tick
+        # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
+        self._ext = self._solver._solver
+
     def reset(self, tau_start_nm: np.ndarray, ddq_start_rad_s2: np.ndarray | None = None) -> None:
         """Start of a motion: the torque the robot applies now (the first command's rate is measured against
-        it) and the acceleration that torque commands (default rest); clears the counters."""
+        it) and the acceleration that torque commands (default rest); clears the counters and the solver's warm
+        start, so an episode does not depend on the one before it."""
+        self._setup_solver()
         tau = np.asarray(tau_start_nm, dtype=np.float64)
         if tau.shape != (self.n,) or not np.all(np.isfinite(tau)):
             raise ValueError(f"tau_start_nm must be {self.n} finite torques, got {tau_start_nm!r}")
