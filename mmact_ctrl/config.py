@@ -53,6 +53,8 @@ class StackConfig:
             (``communication_constraints_violation``).
         mpc_keep_plan_s: hybrid with MPC: after a failed or late solve the last plan is kept this long after the
             last good solve, then the QP tracks the smoothed reference directly until a solve succeeds, s.
+        mpc_blend_s: hybrid with MPC: a new plan takes over from the previous one over this long (smoothstep
+            blend of the two references; each plan also starts from the state being tracked), s.
     """
 
     mode: str = "hybrid"
@@ -74,6 +76,7 @@ class StackConfig:
     plan_resync_m_s: float = 0.25
     abort_after_missed_ticks: int = 20
     mpc_keep_plan_s: float = 0.1
+    mpc_blend_s: float = 0.02
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -108,6 +111,8 @@ class StackConfig:
         if not 0 < self.mpc_keep_plan_s <= self.mpc.horizon_steps * self.mpc.dt_s:
             raise ValueError(f"mpc_keep_plan_s must be in (0, the MPC horizon {self.mpc.horizon_steps * self.mpc.dt_s:g} s], "
                              f"got {self.mpc_keep_plan_s}")
+        if not 0 <= self.mpc_blend_s <= self.mpc.horizon_steps * self.mpc.dt_s:
+            raise ValueError(f"mpc_blend_s must be in [0, the MPC horizon], got {self.mpc_blend_s}")
         if self.abort_after_missed_ticks < 1:
             raise ValueError(f"abort_after_missed_ticks must be >= 1, got {self.abort_after_missed_ticks}")
         if self.latency_ms / 1000.0 >= self.duration_s:

@@ -60,6 +60,7 @@ class HybridController:
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
         self._plan: MPCPlan | None = None
+        self._prev_plan: MPCPlan | None = None
         self._next_mpc_s = 0.0
         self.q_post = self.model.home_q_rad
         _, self.rot_nominal = self.model.fk(self.q_post)
@@ -101,6 +102,7 @@ class HybridController:
         self.mpc_bypass_ticks = 0
         self._good_plan_end_s = 0.0
         self._plan = None
+        self._prev_plan = None
         self._next_mpc_s = 0.0
         if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
             self.mpc.last_plan = None
@@ -283,6 +285,7 @@ class HybridController:
             if t_s >= self._next_mpc_s - 1e-9:
                 ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
                 self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
+                self._prev_plan = self._plan
                 self._plan = self._solve_mpc(t_s, q_rad, dq_rad_s, terms, rot)
                 if self._plan.ok:
                     self._good_plan_end_s = t_s + self.config.mpc_keep_plan_s
@@ -293,6 +296,17 @@ class HybridController:
                 q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
                 sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2,
                                  plan.ee_pos_m[0], plan.ee_jacobian_lin, q_post, task)
+                prev, blend_s = self._prev_plan, self.config.mpc_blend_s
+                if prev is not None and t_s - plan.t0_s < blend_s:
+                    # hand-over: the new plan's acceleration differs from the old one's; blend the two references
+                    # with a smoothstep so the torque the QP needs ramps instead of stepping
+                    q_old, task_old = np.empty(7), np.empty((3, 3))
+                    sample_plan_task(t_s, prev.t0_s, prev.dt_s, prev.q_rad, prev.dq_rad_s, prev.ddq_rad_s2,
+                                     prev.ee_pos_m[0], prev.ee_jacobian_lin, q_old, task_old)
+                    x = (t_s - plan.t0_s) / blend_s
+                    w = x * x * (3.0 - 2.0 * x)
+                    task = task_old + w * (task - task_old)
+                    q_post = q_old + w * (q_post - q_old)
                 pos, vel, acc = task[0], task[1], task[2]
             else:  # the MPC has failed past the last good plan's horizon: the QP tracks the smoothed reference
                 pos, vel, acc, q_post = ref_pos + ref_vel * (t_s - t_slow), ref_vel, ref_acc, self.q_post

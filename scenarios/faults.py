@@ -589,7 +589,7 @@ def main(argv: list[str] | None = None) -> int:
     md = ["# Fault-injection suite", "",
           f"- command: `{command}`",
           f"- date: {started.strftime('%Y-%m-%d %H:%M:%S UTC')}; wall time {wall_s:.1f} s; {len(rows)} episodes",
-          f"- {args.target} target at {args.speed:g} m/s, two balls, {args.duration_s:g} s episodes, fault onset "
+          f"- {'static target' if args.target == 'static' else f'{args.target} target at {args.speed:g} m/s'}, two balls, {args.duration_s:g} s episodes, fault onset "
           f"{args.onset_s:g} s, seeds {args.seed}..{args.seed + args.seeds - 1}, workers {args.workers}",
           f"- sources: {', '.join(args.sources)}; modes: {', '.join(args.modes)}",
           "",
