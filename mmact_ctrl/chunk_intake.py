@@ -18,8 +18,8 @@ when it is due (:meth:`ChunkIntake.admit`)
     ``stale``          nothing of it is left to run (it ends before now: e.g. a latency spike);
     ``out_of_order``   its observation is not newer than that of the chunk already running;
     ``splice``         its position when it becomes active (retargeting included) is farther than
-                       ``splice_radius_m`` from the reference being executed (after Ruckig in hybrid): a jump the
-                       robot should not be asked to make.
+                       ``splice_radius_m`` from the reference being executed (see
+                       ``HybridController.splice_distance_m``): a jump the robot should not be asked to make.
 
 A rejected chunk leaves the previous chunk running. ``rejections`` counts each reason; ``events`` keeps
 ``(t_s, reason, detail)`` for the report.
@@ -132,11 +132,11 @@ class ChunkIntake:
         out, self.pending[:] = self.pending[:n], self.pending[n:]
         return out
 
-    def admit(self, entry: Pending, t_s: float, running: ChunkReference | None, ref_pos_m: np.ndarray,
-              start_pos_m: np.ndarray | None = None) -> bool:
-        """Whether the due chunk may become active at ``t_s``, given the chunk ``running``, the reference position
-        being executed ``ref_pos_m`` (3,) and where the new chunk would put it, ``start_pos_m`` (3,; default: the
-        chunk's own position at ``t_s``; the controller adds its retargeting); a refusal is counted."""
+    def admit(self, entry: Pending, t_s: float, running: ChunkReference | None, ref_pos_m: np.ndarray | None = None,
+              gap_m: float | None = None) -> bool:
+        """Whether the due chunk may become active at ``t_s``, given the chunk ``running`` and either the reference
+        position being executed ``ref_pos_m`` (3,; compared with the chunk's own position at ``t_s``) or the jump
+        ``gap_m`` the controller computed (retargeting and smoothing included); a refusal is counted."""
         chunk = entry.chunk
         if chunk.end_s <= t_s:
             self._reject(t_s, "stale", f"ended {t_s - chunk.end_s:.3f} s before it became due")
@@ -144,9 +144,10 @@ class ChunkIntake:
         if running is not None and chunk.t0_s <= running.chunk.t0_s:
             self._reject(t_s, "out_of_order", f"observed at {chunk.t0_s:.3f} s, running chunk at {running.chunk.t0_s:.3f} s")
             return False
-        start = (ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=None).sample(t_s)[0][:3]
-                 if start_pos_m is None else np.asarray(start_pos_m, dtype=float))
-        gap = float(np.linalg.norm(start - ref_pos_m))
+        if gap_m is None:
+            start = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=None).sample(t_s)[0][:3]
+            gap_m = float(np.linalg.norm(start - np.asarray(ref_pos_m, dtype=float)))
+        gap = float(gap_m)
         if not gap <= self.splice_radius_m:
             self._reject(t_s, "splice", f"{gap:.3f} m from the reference")
             return False

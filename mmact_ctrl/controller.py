@@ -138,13 +138,17 @@ class HybridController:
         if self._ensemble_mode:
             self.ensemble = [c for c in self.ensemble if c.t_last_s > t_s] + [self.active]
 
-    def executed_position(self, t_s: float) -> np.ndarray:
-        """The reference position (3,) m being executed at ``t_s``: after Ruckig in hybrid (where a jump of the raw
-        reference, e.g. retargeting onto a target that jumped, is absorbed and smoothed away), the raw reference
-        otherwise."""
+    def splice_distance_m(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> float:
+        """How far the reference would jump at ``t_s`` if ``chunk`` became active now, m: the distance from where it
+        would start (retargeting included, :meth:`start_position`) to the reference being executed. In hybrid with
+        Ruckig, any jump of the raw reference is absorbed and smoothed away, so the start may be near either the
+        raw reference (e.g. both retargeted onto a target that jumped) or the smoothed one (the new chunk starts
+        where the robot is while the raw reference already snapped ahead): the smaller distance counts."""
+        start = self.start_position(chunk, t_s, target_at_obs_m)
+        gap = float(np.linalg.norm(start - self.reference(t_s)[0]))
         if self.hybrid and self.config.use_ruckig and self._smoothed_pos is not None:
-            return self._smoothed_pos
-        return self.reference(t_s)[0]
+            gap = min(gap, float(np.linalg.norm(start - self._smoothed_pos)))
+        return gap
 
     def start_position(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> np.ndarray:
         """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, retargeting

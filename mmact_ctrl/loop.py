@@ -223,8 +223,8 @@ def run_episode(
                 next_plan_s = t + replan_period_s if mode == "receding" else next_plan_s + replan_period_s
         tick0 = time.perf_counter()
         for entry in intake.due(t + eps):
-            start = controller.start_position(entry.chunk, t, entry.target_at_obs_m)
-            if intake.admit(entry, t, controller.active, controller.executed_position(t), start):
+            gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m)
+            if intake.admit(entry, t, controller.active, gap_m=gap_m):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
                 log.chunk_active_s.append(t)
                 last_arrival_s = t

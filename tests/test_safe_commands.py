@@ -199,3 +199,15 @@ def test_an_observation_that_already_saw_a_jump_is_not_shifted_by_it_twice():
     assert np.linalg.norm(kf.estimate_at_observation(1.0, recorded_at) - new) < 0.006
     np.testing.assert_array_equal(kf.estimate_at_observation(0.98, recorded_before), recorded_before)
     assert kf.estimate_at_observation(1.0, None) is None
+
+
+def test_wilson_interval_against_known_values():
+    from scenarios.safety_table import wilson_interval
+
+    lo, hi = wilson_interval(20, 20)
+    assert lo == pytest.approx(0.8389, abs=1e-3) and hi == 1.0
+    lo, hi = wilson_interval(10, 20)
+    assert lo == pytest.approx(0.2993, abs=1e-3) and hi == pytest.approx(0.7007, abs=1e-3)
+    assert wilson_interval(0, 20)[0] == 0.0
+    with pytest.raises(ValueError, match="successes"):
+        wilson_interval(21, 20)
