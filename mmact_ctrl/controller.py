@@ -105,8 +105,7 @@ class HybridController:
         self._prev_plan = None
         self._next_mpc_s = 0.0
         if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
-            self.mpc.last_plan = None
-            self.mpc.solves = self.mpc.failures = self.mpc.late = 0
+            self.mpc.reset()
         self.active = None
         self.ensemble = []
         self._trusted = False
