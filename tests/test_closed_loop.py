@@ -127,16 +127,22 @@ def test_mpc_in_the_loop_keeps_limits_and_a_failed_solve_falls_back():
     assert m["limit_violations"] == 0 and m["success"]
     # now every third MPC solve raises inside the solver: fallbacks are counted, the arm stays safe
     broken = HybridController(cfg)
-    inner = broken.mpc._backend.solve
     calls = [0]
+    reset = broken.mpc.reset
 
-    def flaky(params):
-        calls[0] += 1
-        if calls[0] % 3 == 0:
-            raise RuntimeError("injected solver failure")
-        return inner(params)
+    def reset_and_break():  # the episode's reset sets the back-end up again: break the new one
+        reset()
+        inner = broken.mpc._backend.solve
 
-    broken.mpc._backend.solve = flaky
+        def flaky(params):
+            calls[0] += 1
+            if calls[0] % 3 == 0:
+                raise RuntimeError("injected solver failure")
+            return inner(params)
+
+        broken.mpc._backend.solve = flaky
+
+    broken.mpc.reset = reset_and_break
     log = run_episode(world, source, broken, seed=2)
     m2 = episode_metrics(log)
     assert broken.mpc.failures >= 60
