@@ -579,6 +579,13 @@ class TaskSpaceMPC:
         self.q_nominal_rad = _as_array("q_nominal_rad", q_nominal_rad, (N_JOINTS,))
         self._qp = _QPBuilder(config, limits)
         self._a_max = self._qp.a_max
+        self._u_idx = self._qp.u_idx
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the last plan, the counters and the solver's warm start (the back-end is set up again, ~2 ms; the
+        CasADi problem, 0.3 s to build, is kept): an episode does not depend on the one before it."""
+        config = self.config
         opts = dict(config.solver_options)
         if config.solver == "osqp_piqp":
             self._backend: _ConicBackend | _OSQPBackend | _HybridBackend = _HybridBackend(self._qp, opts)
@@ -586,7 +593,6 @@ class TaskSpaceMPC:
             self._backend = _OSQPBackend(self._qp, opts)
         else:
             self._backend = _ConicBackend(self._qp, config.solver, opts)
-        self._u_idx = self._qp.u_idx
         self.solves = 0
         self.failures = 0
         self.late = 0
