@@ -1,8 +1,8 @@
 """Latency-aware target estimator: :class:`~controllers.target_filter.TargetFilter`'s contract, plus
 
 1. **latency-aware fusion**: ``fuse(t_capture_s, z)`` takes a measurement of the target *as it was* at its capture
-   time, however late it arrives. The state lives at the last fused capture time ``t_s``; each measurement is
-   propagated to with the real time difference (F and Q rebuilt for that dt) and fused there, and
+   time, however late it arrives. The state lives at the last fused capture time ``t_s``; it is propagated to
+   each new capture time with the real time difference (F and Q rebuilt for that dt) and updated there, and
    :meth:`TargetEstimator.predict_pos` extrapolates to *now* with the model. A measurement captured before the
    newest one already processed (out of order) but within ``history_s`` of it rolls the estimator back to the
    state stored just before it and re-fuses the later stored measurements in capture order, so the result does
@@ -12,12 +12,16 @@
    constant-acceleration Kalman filter sharing one 9-dim state ``[pos(3), vel(3), acc(3)]`` (the CV filter's F
    sets the acceleration to zero, so both states are compatible for mixing).
 
-   What the IMM mode probabilities do (measured, default configuration, 100 Hz, 2 mm noise): on a straight line
-   at constant velocity the CV mode wins, p(cv) ~0.8 on average (it is never 1: the noise keeps giving the CA
-   filter's small spurious acceleration some likelihood, and the Markov matrix pulls it back towards
-   stationary); the prediction is then close to the CV filter's. On a circle (radius 0.08 m, 0.4 m/s: 2 m/s^2
-   centripetal) the CV filter lags and its innovations are larger: p(ca) rises to ~0.95 and the prediction is
-   close to the CA filter's, which extrapolates along the curve.
+   What the IMM mode probabilities ``mode_probs = (p_cv, p_ca)`` do (measured, default configuration, 100 Hz,
+   2 mm noise, 5 s): on a straight line at constant velocity the quiet CV mode explains the measurements best and
+   p(ca) sinks to ~0.07 (median; 10-90 %: 0.06-0.10). It never reaches 0: the Markov matrix moves 1 % per step
+   back to CA, which only the likelihood ratio offsets. The prediction is then close to a CV filter's, and
+   better than the default CV filter's, since the IMM's CV mode has a quieter process noise
+   (``imm_accel_noise_m_s2`` 0.5 vs 2 m/s^2): the CA mode takes the manoeuvres. On a circle (radius 0.08 m,
+   0.4 m/s: 2 m/s^2 centripetal) the CV mode lags and its innovations grow: p(ca) rises to ~0.94 (10-90 %:
+   0.88-0.97), and the prediction follows the CA filter's, which bends along the curve (a quadratic
+   extrapolation: 200 ms ahead, i.e. one radian around the circle, it still misses by ~40 mm, against ~56 mm for
+   CV).
 
 Same gates as ``TargetFilter`` (non-finite, frozen, outlier, jump re-initialisation when gated measurements
 agree), same status strings, same counters, plus ``"dropped"`` (older than ``history_s``) and the counters
@@ -30,7 +34,8 @@ Q over a 0.3 s dropout would not be the tick-by-tick filter's). Where it deliber
 ``TargetFilter``: ``pos_m``/``vel_m_s``/``t_s`` are the estimate at the last *fused* capture time (``TargetFilter``
 moves them to every step's time; ``predict_pos(t)`` agrees), and the coast after ``coast_s`` without a fused
 measurement drops the motion estimate exactly at ``t_s + coast_s`` (``TargetFilter``: at the first step past it, up
-to one period later).
+to one period later). Model ``"ca"`` differs from ``TargetFilter``'s ca on purpose: its Q is a white jerk in m/s^3
+(see ``_q_block``) and ``predict_pos`` extrapolates with the acceleration (``TargetFilter`` with the velocity only).
 
 Imports numpy, filterpy and the standard library only (it runs on a real arm).
 """
@@ -60,12 +65,19 @@ class EstimatorConfig:
         ``imm_transition``; also the tolerance of :meth:`TargetEstimator.estimate_at_observation`, s.
     meas_noise_m: measurement noise standard deviation, m.
     accel_noise_m_s2: cv process noise: standard deviation of the white (piecewise-constant) acceleration, m/s^2.
-    jerk_noise_m_s3: ca process noise: standard deviation of the white jerk, m/s^3. 10 = the jerk of a 2 m/s^2
-        centripetal acceleration turning at 5 rad/s (0.4 m/s on a 0.08 m circle); see the module's tests for the
-        sweep it was chosen from.
+    jerk_noise_m_s3: ca (and the IMM's CA mode) process noise: standard deviation of the white jerk, m/s^3.
+        Chosen by measurement on the 0.08 m / 0.4 m/s circle (2 m/s^2 turning at 5 rad/s: a 10 m/s^3 jerk), 100 Hz,
+        2 mm noise: one-step RMS error 4.9 / 3.1 / 2.6 / 2.6 / 2.8 / 3.2 mm at 5 / 10 / 20 / 30 / 50 / 100; 20 is
+        the best one-step and within 1 mm of the best 200 ms-ahead error (30: 41 vs 42 mm).
+    imm_accel_noise_m_s2: process noise of the IMM's CV mode (white acceleration), m/s^2. Quieter than the cv
+        model's: the CA mode covers the manoeuvres, so the CV mode can be the steady-motion hypothesis. Measured
+        (200 ms ahead, line / circle): 2.0 -> 11 / 41 mm, 1.0 -> 6.6 / 41, 0.5 -> 4.5 / 41, 0.2 -> 3.1 / 41 mm;
+        0.5 keeps some tolerance to a target that is not exactly at constant velocity.
     imm_transition: the IMM's Markov matrix per ``dt_s`` (rows: from cv, from ca; columns: to cv, to ca).
         Stay probabilities must sum to more than 1 (the per-dt matrix is raised to fractional powers for other
-        steps).
+        steps). Measured (200 ms ahead, line / circle / 0.4 s after a line turns into the circle): stay 0.98 ->
+        5.1 / 40.9 / 45.3 mm, 0.99 -> 4.5 / 41.4 / 46.1, 0.995 -> 4.1 / 41.7 / 46.7; 0.99 (a mode lasts ~1 s on
+        average) trades a little manoeuvre onset for steadier straight lines.
     init_vel_std_m_s: initial velocity standard deviation, m/s.
     init_acc_std_m_s2: initial acceleration standard deviation (ca, imm), m/s^2 (1 as in ``TargetFilter``'s ca).
     history_s: how far back (capture time, behind the newest processed measurement) an out-of-order measurement
@@ -94,8 +106,7 @@ class EstimatorConfig:
         if self.model not in FILTER_MODELS:
             raise ValueError(f"EstimatorConfig.model must be one of {FILTER_MODELS}, got {self.model!r}")
         for name in ("dt_s", "meas_noise_m", "accel_noise_m_s2", "jerk_noise_m_s3", "imm_accel_noise_m_s2",
-                     "init_vel_std_m_s",
-                     "init_acc_std_m_s2", "reset_gate", "jump_agree_m", "coast_s"):
+                     "init_vel_std_m_s", "init_acc_std_m_s2", "reset_gate", "jump_agree_m", "coast_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"EstimatorConfig.{name} must be a finite number > 0, got {value!r}")
@@ -129,9 +140,9 @@ def _q_block(order: int, h: float, var: float) -> np.ndarray:
     h^2/2, h]) is *not* filterpy's ``dim=3``, whose noise is an acceleration increment per step (var * 1 on the
     acceleration whatever h: it would not scale with a variable dt, and ``TargetFilter``'s ca with 2 m/s^2 per
     10 ms step is a 200 m/s^3 jerk)."""
-    g = np.array([h**2 / 2.0, h]) if order == 2 else np.array([h**3 / 6.0, h**2 / 2.0, h])
     if order == 2:  # the exact expressions of Q_discrete_white_noise(dim=2): TargetFilter's Q to the bit
         return np.array([[0.25 * h**4, 0.5 * h**3], [0.5 * h**3, h**2]]) * var
+    g = np.array([h**3 / 6.0, h**2 / 2.0, h])
     return np.outer(g, g) * var
 
 
@@ -154,6 +165,33 @@ class _Pred(NamedTuple):
     state: tuple
     x: np.ndarray
     P: np.ndarray
+
+
+def turn_extrapolate(x: np.ndarray, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities (N, 3) ``taus`` (N,) ahead of a [pos, vel, acc] state, as a *coordinated turn*:
+    the acceleration's part across the velocity turns the velocity at ``omega = |a_perp| / |v|`` about
+    ``v x a_perp`` (a circle), the part along it speeds the target up or down (a parabola). For a target on a circle
+    the polynomial ``p + v t + a t^2 / 2`` leaves the circle along a parabola (40 mm off after 200 ms at 0.4 m/s on
+    an 8 cm circle); this stays on it. Below 2 cm/s, or when the turn rate would exceed 20 rad/s, the polynomial."""
+    p, v, a = x[:3], x[3:6], x[6:9]
+    taus = np.asarray(taus, dtype=float)
+    speed = float(np.linalg.norm(v))
+    if speed < 0.02:
+        return (p + np.multiply.outer(taus, v) + np.multiply.outer(0.5 * taus**2, a),
+                v + np.multiply.outer(taus, a))
+    v_hat = v / speed
+    a_par = float(a @ v_hat) * v_hat
+    a_perp = a - a_par
+    omega = float(np.linalg.norm(a_perp)) / speed
+    if omega < 1e-6 or omega > 20.0:
+        return (p + np.multiply.outer(taus, v) + np.multiply.outer(0.5 * taus**2, a),
+                v + np.multiply.outer(taus, a))
+    wt = omega * taus
+    sin_w, cos_w = np.sin(wt), np.cos(wt)
+    pos = (p + np.multiply.outer(sin_w / omega, v) + np.multiply.outer((1.0 - cos_w) / omega**2, a_perp)
+           + np.multiply.outer(0.5 * taus**2, a_par))
+    vel = np.multiply.outer(cos_w, v) + np.multiply.outer(sin_w / omega, a_perp) + np.multiply.outer(taus, a_par)
+    return pos, vel
 
 
 class _Linear:
@@ -215,15 +253,15 @@ class _Linear:
     def extrapolate(self, state: tuple, taus: np.ndarray) -> np.ndarray:
         """Positions (N, 3) ``taus`` (N,) after the state's time (mean only)."""
         x = state[0]
-        pos = x[:3] + np.multiply.outer(taus, x[3:6])
         if self.order == 3:
-            pos = pos + np.multiply.outer(0.5 * taus**2, x[6:9])
-        return pos
+            return turn_extrapolate(x, taus)[0]
+        return x[:3] + np.multiply.outer(taus, x[3:6])
 
     def extrapolate_vel(self, state: tuple, taus: np.ndarray) -> np.ndarray:
         x = state[0]
-        vel = np.broadcast_to(x[3:6], (taus.size, 3))
-        return vel + np.multiply.outer(taus, x[6:9]) if self.order == 3 else vel.copy()
+        if self.order == 3:
+            return turn_extrapolate(x, taus)[1]
+        return np.broadcast_to(x[3:6], (taus.size, 3)).copy()
 
     def mode_probs(self, state: tuple) -> np.ndarray | None:
         return None
@@ -267,9 +305,9 @@ class _IMM:
             s = h / self.config.dt_s  # the Markov matrix per dt_s, raised to the power h / dt_s
             if abs(s - 1.0) < 1e-9:
                 m = self.M.copy()
-            else:
-                pi = self.mu0
-                m = np.outer(np.ones(2), pi) + (self._lam**s if self._lam < 1.0 else 1.0) * (np.eye(2) - np.outer(np.ones(2), pi))
+            else:  # M^s = 1 pi + lam^s (I - 1 pi), lam = p + q - 1 the second eigenvalue, pi the stationary row
+                stationary = np.outer(np.ones(2), self.mu0)
+                m = stationary + (self._lam**s if self._lam < 1.0 else 1.0) * (np.eye(2) - stationary)
             got = (np.kron(f_cv, eye), np.kron(q_cv, eye), np.kron(_f_block(3, h), eye),
                    np.kron(_q_block(3, h, self.var_j), eye), m)
             self._mats_cache[key] = got
@@ -325,13 +363,12 @@ class _IMM:
         are held over the horizon)."""
         x_cv, _, x_ca, _, mu = state
         pos_cv = x_cv[:3] + np.multiply.outer(taus, x_cv[3:6])
-        pos_ca = x_ca[:3] + np.multiply.outer(taus, x_ca[3:6]) + np.multiply.outer(0.5 * taus**2, x_ca[6:9])
+        pos_ca = turn_extrapolate(x_ca, taus)[0]
         return mu[0] * pos_cv + mu[1] * pos_ca
 
     def extrapolate_vel(self, state: tuple, taus: np.ndarray) -> np.ndarray:
         x_cv, _, x_ca, _, mu = state
-        return mu[0] * np.broadcast_to(x_cv[3:6], (taus.size, 3)) + mu[1] * (
-            x_ca[3:6] + np.multiply.outer(taus, x_ca[6:9]))
+        return mu[0] * np.broadcast_to(x_cv[3:6], (taus.size, 3)) + mu[1] * turn_extrapolate(x_ca, taus)[1]
 
     def mode_probs(self, state: tuple) -> np.ndarray | None:
         return state[4].copy()

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.qp_id import TaskReference
+from controllers.target_estimator import EstimatorConfig, TargetEstimator
 from controllers.target_filter import FilterConfig, TargetFilter
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
@@ -106,11 +107,54 @@ def bench_components(calls: int = 2000, seed: int = 0) -> dict:
     return out
 
 
-def bench_episode(world_factory: str, source_factory: str, duration_s: float = 6.0, seed: int = 0) -> dict:
-    """Whole-tick and world-step timings, and the real-time factor, of one hybrid episode."""
+def bench_perception(world_factory: str, sensor_factory: str, frames: int = 60, seed: int = 0) -> dict:
+    """One camera perception step: render + detection (``sensor.capture``) + the filter's fusion, on frames of a
+    moving target; and what it costs per simulated second at the sensor's rate."""
+    world = _load(world_factory)()
+    sensor = _load(sensor_factory)(world)
+    world.reset(seed)
+    sensor.reset(seed)
+    est = TargetEstimator(EstimatorConfig(dt_s=1.0 / sensor.config.rate_hz))
+    sensor.capture(0.0)  # warm-up: the first capture creates the renderer
+    every = int(round(1.0 / (sensor.config.rate_hz * world.dt_s)))
+    step_times, render_times = [], []
+    hold = np.zeros(7)
+    for k in range(frames * every):
+        world.step(world_hold_torque(world, hold), 0.08)
+        if k % every == 0:
+            t0 = time.perf_counter()
+            m = sensor.capture(k * world.dt_s)
+            t1 = time.perf_counter()
+            est.fuse(m.t_capture_s, m.pos_m)
+            step_times.append(time.perf_counter() - t0)
+            render_times.append(t1 - t0)
+    getattr(sensor, "close", lambda: None)()
+    world.close()
+    out = {"perception_step": _stats(step_times), "camera_capture": _stats(render_times)}
+    out["perception_ms_per_sim_s"] = float(np.median(step_times) * 1e3 * sensor.config.rate_hz)
+    return out
+
+
+def world_hold_torque(world, out: np.ndarray) -> np.ndarray:
+    """Gravity compensation of the world's arm (the bench only needs it to stand still while frames are taken)."""
+    if not hasattr(world_hold_torque, "_model"):
+        from controllers.robot_model import PandaModel
+
+        world_hold_torque._model = PandaModel()
+    state = world.state()
+    out[:] = world_hold_torque._model.terms(state.q_rad, state.dq_rad_s).h
+    return out
+
+
+def bench_episode(world_factory: str, source_factory: str, duration_s: float = 6.0, seed: int = 0,
+                  sensor_factory: str | None = None) -> dict:
+    """Whole-tick and world-step timings, and the real-time factor, of one hybrid episode (with the target
+    measured by ``sensor_factory``'s sensor when given)."""
     world = _load(world_factory)()
     source = _load(source_factory)()
-    controller = HybridController(StackConfig(duration_s=duration_s))
+    sensor = _load(sensor_factory)(world) if sensor_factory else None
+    controller = HybridController(StackConfig(duration_s=duration_s,
+                                              perception_hz=sensor.config.rate_hz if sensor else 100.0))
     step_times: list[float] = []
     inner = world.step
 
@@ -120,12 +164,14 @@ def bench_episode(world_factory: str, source_factory: str, duration_s: float = 6
         step_times.append(time.perf_counter() - t0)
 
     world.step = timed_step  # instrument the world step only
-    log = run_episode(world, source, controller, seed=seed)
+    log = run_episode(world, source, controller, seed=seed, sensor=sensor)
+    getattr(sensor, "close", lambda: None)()
     world.close()
     return {
         "tick": _stats(log.tick_us * 1e-6),
         "mj_step": _stats(step_times),
         "realtime_factor": float(duration_s / log.wall_s),
+        "sensor_s_per_sim_s": float(log.sensor_wall_s / duration_s),
     }
 
 
@@ -136,17 +182,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration-s", type=float, default=6.0, help="length of the timed hybrid episode, s")
     p.add_argument("--world", default="scenarios.factory:make_world", help="module:function that builds the world")
     p.add_argument("--source", default="scenarios.factory:make_expert", help="module:function that builds the chunk source")
+    p.add_argument("--sensor", default="scenarios.camera_sensor:make_camera_sensor",
+                   help="module:function(world) that builds the camera sensor timed as the perception step ('' to skip)")
     p.add_argument("--json", metavar="PATH", help="write {component: {median_us, p99_us}, realtime_factor: x}")
     args = p.parse_args(argv)
     if args.calls < 10 or args.duration_s <= 0:
         p.error(f"--calls must be >= 10 and --duration-s > 0, got {args.calls} and {args.duration_s}")
     results = bench_components(args.calls)
     results.update(bench_episode(args.world, args.source, args.duration_s))
+    if args.sensor:
+        results.update(bench_perception(args.world, args.sensor))
+        camera = bench_episode(args.world, args.source, args.duration_s, sensor_factory=args.sensor)
+        results["realtime_factor_camera"] = camera["realtime_factor"]
+        results["camera_sensor_s_per_sim_s"] = camera["sensor_s_per_sim_s"]
     print(f"{'component':<12}{'median [us]':>14}{'p99 [us]':>12}")
     for name, r in results.items():
         if isinstance(r, dict):
             print(f"{name:<12}{r['median_us']:>14.1f}{r['p99_us']:>12.1f}")
     print(f"{'real-time factor (hybrid episode, scripted source)':<12}: {results['realtime_factor']:.1f}x")
+    if "realtime_factor_camera" in results:
+        print(f"camera perception: {results['perception_ms_per_sim_s']:.0f} ms per simulated second at the sensor rate; "
+              f"hybrid episode with the camera: {results['realtime_factor_camera']:.1f}x real time "
+              f"(sensor {1e3 * results['camera_sensor_s_per_sim_s']:.0f} ms per simulated second)")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(results, indent=2))

@@ -9,7 +9,7 @@ from controllers.mpc import MPCConfig
 from controllers.qp_id import QPConfig
 from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
-from controllers.target_filter import FilterConfig
+from controllers.target_estimator import EstimatorConfig
 
 MODES: tuple[str, ...] = ("open_loop", "receding", "temporal_ensemble", "inpaint", "hybrid")
 #: modes that execute chunks without the control layer's corrections (the baselines from the field).
@@ -79,7 +79,7 @@ class StackConfig:
     mpc_blend_s: float = 0.02
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
-    filter: FilterConfig = field(default_factory=FilterConfig)
+    filter: EstimatorConfig = field(default_factory=EstimatorConfig)
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
     def __post_init__(self) -> None:

@@ -13,7 +13,7 @@ from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import orientation_error, rot_from_rotvec, rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
 from controllers.stop import StopTrajectory
-from controllers.target_filter import TargetFilter
+from controllers.target_estimator import TargetEstimator
 from controllers.tick_kernels import sample_plan_task
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
@@ -55,7 +55,7 @@ class HybridController:
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         smoother_dt_s = 1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s
         self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
-        self.filter = TargetFilter(replace(config.filter, dt_s=1.0 / config.perception_hz))
+        self.filter = TargetEstimator(replace(config.filter, dt_s=1.0 / config.perception_hz))
         self.mpc = TaskSpaceMPC(config.mpc, q_nominal_rad=self.model.home_q_rad) if self.use_mpc else None
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
@@ -93,7 +93,7 @@ class HybridController:
         self._gripper_m = GRIPPER_OPEN_M
         self._smoothed_pos = None
         self.smoother.reset(pos, self._hold_rotvec)
-        self.filter = TargetFilter(self.filter.config)
+        self.filter = TargetEstimator(self.filter.config)
         tau_start = np.array(self.model.terms(q, dq).h)
         self.qp.reset(tau_start)
         self.stop = None
@@ -117,14 +117,15 @@ class HybridController:
         return pos, rotvec_from_rot(rot, self.rot_nominal)
 
     # ---- inputs at their own rates -------------------------------------------
-    def perceive(self, t_s: float, z_m: np.ndarray | None) -> None:
-        """Perception tick (100 Hz): fuse one target measurement (None = missed)."""
+    def perceive(self, t_capture_s: float, z_m: np.ndarray | None) -> None:
+        """Fuse one target measurement of the scene as it was at ``t_capture_s`` (None = missed); it may arrive
+        later than that (sensor latency): the filter fuses it at its capture time and predicts to now."""
         if self.hybrid:
-            self.filter.step(t_s, z_m)
+            self.filter.fuse(t_capture_s, z_m)
 
-    def target_estimate(self) -> np.ndarray | None:
-        """Current filtered target estimate (None before the first measurement)."""
-        return self.filter.pos_m if self.filter.initialized else None
+    def target_estimate(self, t_s: float) -> np.ndarray | None:
+        """The filtered target estimate predicted to ``t_s`` (None before the first measurement)."""
+        return self.filter.predict_pos(t_s) if self.filter.initialized else None
 
     def activate(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> None:
         """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency); ends a watchdog stop."""
@@ -157,7 +158,7 @@ class HybridController:
         pos = ref.sample(t_s)[0][:3]
         if self.hybrid and self.filter.initialized and trusted(self.config.retarget, ref.aim_pos_m, target_at_obs_m):
             offset, _ = retarget_offset(self.config.retarget, t_s, ref.aim_pos_m, target_at_obs_m,
-                                        self.filter.predict_pos(t_s), self.filter.vel_m_s, t_s,
+                                        self.filter.predict_pos(t_s), self.filter.predict_vel(t_s), t_s,
                                         min(ref.t_last_s, t_s + 1.0 / self.config.replan_hz))
             pos = pos + offset
         return pos
@@ -212,7 +213,7 @@ class HybridController:
                 self.active.aim_pos_m,
                 self.active.target_at_obs_m,
                 self.filter.predict_pos(t_s),
-                self.filter.vel_m_s,
+                self.filter.predict_vel(t_s),
                 self.active.t_active_s,
                 self._blend_end_s,
             )

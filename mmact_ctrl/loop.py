@@ -17,6 +17,7 @@ from controllers.safety import CommandLimits, SafetyMonitor
 from mmact_ctrl.chunk import ChunkSource, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
+from mmact_ctrl.perception import OracleSensor, TargetSensor
 from mmact_ctrl.reference import ChunkReference
 from mmact_ctrl.world import World
 
@@ -61,6 +62,10 @@ class EpisodeLog:
     watchdog_stops: int = 0
     gated_measurements: dict[str, int] = field(default_factory=dict)
     perception_errors: int = 0
+    measurements: int = 0
+    measurements_lost: int = 0
+    sensor_wall_s: float = 0.0
+    sensor_stats: dict = field(default_factory=dict)
     missed_ticks: int = 0
     rate_clamps: int = 0
     qp_rescues: int = 0
@@ -130,6 +135,7 @@ def run_episode(
     progress=None,
     link: CommandLink | None = None,
     initial_dq_rad_s: np.ndarray | None = None,
+    sensor: TargetSensor | None = None,
 ) -> EpisodeLog:
     """Run one episode of ``controller.config.duration_s`` and return its log.
 
@@ -144,6 +150,8 @@ def run_episode(
         progress: optional callable(fraction) for progress reporting.
         link: whether each tick's command reaches the robot (None: always).
         initial_dq_rad_s: joint velocities (7,) the robot has at the start (None: at rest).
+        sensor: where target measurements come from (``mmact_ctrl.perception``; None: the world's own channel at
+            ``config.perception_hz`` with no latency, :class:`~mmact_ctrl.perception.OracleSensor`).
     """
     cfg = controller.config
     dt = cfg.dt_s
@@ -182,26 +190,30 @@ def run_episode(
     mode = cfg.mode
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
     render_video = getattr(world, "render_video", None)  # optional part of a world: a larger frame for videos
-    perception_every = cfg.perception_every
+    if sensor is None:
+        sensor = OracleSensor(world, cfg.perception_hz, 0.0, dt)
+    sensor.reset(seed)
     missed_in_row = 0
     n_done = n
     wall0 = time.perf_counter()
     for k in range(n):
         t = k * dt
         state = world.state()
-        perceive = k % perception_every == 0
-        if perceive:  # fuse before planning so a chunk observed now records the estimate of now
-            try:
-                z = world.measure_target()
-            except Exception as exc:  # noqa: BLE001 - a crashed sensor is a lost measurement
-                z = None
-                log.perception_errors += 1
-                log.events.append((t, "perception_error", f"{type(exc).__name__}: {exc}"[:200]))
-            tick0 = time.perf_counter()
-            controller.perceive(t, z)
-            perception_us = (time.perf_counter() - tick0) * 1e6
-        else:
-            perception_us = 0.0
+        # fuse what has arrived before planning, so a chunk observed now records the estimate of now
+        s0 = time.perf_counter()
+        try:
+            arrived = sensor.poll(t)
+        except Exception as exc:  # noqa: BLE001 - a crashed sensor is a lost measurement
+            arrived = []
+            log.perception_errors += 1
+            log.events.append((t, "perception_error", f"{type(exc).__name__}: {exc}"[:200]))
+        tick0 = time.perf_counter()
+        log.sensor_wall_s += tick0 - s0
+        for m in arrived:
+            controller.perceive(m.t_capture_s, m.pos_m)
+            log.measurements += 1
+            log.measurements_lost += m.pos_m is None
+        perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
         if t >= next_plan_s - eps:
             obs = observe(world, controller, t, with_image=source.needs_image)
             if mode == "inpaint":
@@ -216,7 +228,7 @@ def run_episode(
                 log.clipped_actions += chunk.n_clipped
                 delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
                 delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
-                intake.submit(t + delay_s, chunk, controller.target_estimate())
+                intake.submit(t + delay_s, chunk, controller.target_estimate(t))
             if mode == "receding" and chunk is not None:  # the next query is set when this chunk starts running
                 next_plan_s = float("inf")
             else:
@@ -282,5 +294,6 @@ def run_episode(
     log.watchdog_stops = controller.watchdog_stops
     f = controller.filter
     log.gated_measurements = {"nonfinite": f.gated_nonfinite, "frozen": f.gated_frozen, "outlier": f.gated_outlier}
+    log.sensor_stats = dict(getattr(sensor, "stats", {}))
     log.jump_times_s = tuple(t for t in world.target_jump_times_s() if t <= cfg.duration_s)
     return log

@@ -140,6 +140,9 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "plan_resyncs": int(log.plan_resyncs),
         "mpc_bypass_ticks": int(log.mpc_bypass_ticks),
         "perception_errors": int(log.perception_errors),
+        "measurements": int(log.measurements),
+        "measurements_lost": int(log.measurements_lost),
+        "sensor_ms_per_sim_s": float(1e3 * log.sensor_wall_s / sim_s) if sim_s > 0 else float("nan"),
         "qp_failures": int(log.qp_failures),
         "smoother_failures": int(log.smoother_failures),
         "mpc_failures": int(log.mpc_failures),
@@ -192,6 +195,9 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
         "policy_latency_ms": _median_p99([x for e in episodes for x in e.get("plan_ms", [])]),
         "realtime_factor": float(np.mean([e["realtime_factor"] for e in episodes])),
+        "measurements_lost_rate": (float(sum(e.get("measurements_lost", 0) for e in episodes)
+                                         / max(1, sum(e.get("measurements", 0) for e in episodes)))),
+        "sensor_ms_per_sim_s": float(np.mean([e.get("sensor_ms_per_sim_s", 0.0) for e in episodes])),
         "jump_recovered_rate": float(sum(e["jumps_recovered"] for e in episodes) / n_jumps) if n_jumps else float("nan"),
         "jump_recovery_s": _nanmedian(recovery),
     }

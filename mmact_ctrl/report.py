@@ -32,6 +32,8 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("real-time factor", "realtime_factor", "{:.1f}x"),
     ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),
     ("jumps recovered <1 s", "jump_recovered_rate", "{:.0%}"),
+    ("measurements lost", "measurements_lost_rate", "{:.0%}"),
+    ("sensor [ms per sim s]", "sensor_ms_per_sim_s", "{:.0f}"),
 )
 
 

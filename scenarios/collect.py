@@ -156,7 +156,7 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
             q, a = question_answer(rng, world.objects_pos_m(), world.target_index)
             pending.append((k, obs, q, a))
             drive = driver if driver is not None and rng.random() < cfg.driver_prob else source
-            controller.activate(drive.plan(obs), t, controller.target_estimate())
+            controller.activate(drive.plan(obs), t, controller.target_estimate(t))
         if any(kk + future == k for kk, *_ in pending) and k not in frames:
             frames[k] = world.render()
         if k == n:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.retarget import RULES, RetargetConfig
-from controllers.target_filter import FilterConfig
+from controllers.target_estimator import FILTER_MODELS, EstimatorConfig
 from mmact_ctrl.config import MODES, StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
@@ -148,6 +148,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="standard deviation of the 100 Hz target measurement noise (m)")
     w.add_argument("--dropout", type=_number(float, "--dropout", 0, True, 0.99), default=0.1,
                    help="probability that a target measurement is missed")
+    w.add_argument("--perception", choices=("oracle", "camera"), default="oracle",
+                   help="where the hybrid layer's target measurements come from: oracle = the truth + --noise-m "
+                        "Gaussian noise with --dropout; camera = the instructed ball measured in rendered depth + "
+                        "segmentation images of --cameras (pixel quantization, depth noise growing with distance, "
+                        "occlusion by the arm)")
+    w.add_argument("--perception-hz", type=_number(float, "--perception-hz", 0, False, 1000.0), default=None,
+                   help="measurement rate (Hz; default 100 for oracle, 30 for camera)")
+    w.add_argument("--perception-latency-ms", type=_number(float, "--perception-latency-ms", 0), default=None,
+                   help="capture-to-arrival delay of each measurement (exposure + processing; ms; default 0 for "
+                        "oracle, 50 for camera): the filter fuses it at its capture time and predicts to now")
+    w.add_argument("--cameras", nargs="+", default=["front"], metavar="NAME",
+                   help="camera perception: the scene camera(s) that measure the ball (front, top, side)")
+    w.add_argument("--filter", choices=FILTER_MODELS, default="cv",
+                   help="target model of the Kalman filter: cv constant velocity, ca constant acceleration, imm an "
+                        "interacting multiple model of both (follows curving and accelerating targets)")
     w.add_argument("--episodes", type=_number(int, "--episodes", 1), default=10, help="episodes per mode")
     w.add_argument("--duration-s", type=_number(float, "--duration-s", 0, False), default=6.0, help="episode length (s)")
     w.add_argument("--seed", type=_number(int, "--seed", 0), default=0, help="seed of the first episode (episode i uses seed+i)")
@@ -174,8 +189,34 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         ensemble_decay_per_s=args.ensemble_decay,
         chunk_timeout_s=args.chunk_timeout_s,
         splice_radius_m=args.splice_radius_m,
-        filter=FilterConfig(frozen_gate=args.noise_m > 0),  # a noise-free sensor repeats itself legitimately
+        perception_hz=perception_hz(args),
+        # a noise-free oracle repeats itself legitimately: the frozen gate is for real (noisy) sensors
+        filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
     )
+
+
+def perception_hz(args: argparse.Namespace) -> float:
+    if args.perception_hz is not None:
+        return float(args.perception_hz)
+    return 30.0 if args.perception == "camera" else 100.0
+
+
+def perception_latency_ms(args: argparse.Namespace) -> float:
+    if args.perception_latency_ms is not None:
+        return float(args.perception_latency_ms)
+    return 50.0 if args.perception == "camera" else 0.0
+
+
+def make_sensor(args: argparse.Namespace, world, dt_s: float):
+    """The target sensor of ``--perception`` on ``world``."""
+    if args.perception == "camera":
+        from scenarios.camera_sensor import CameraSensor, CameraSensorConfig
+
+        return CameraSensor(world, CameraSensorConfig(rate_hz=perception_hz(args), latency_ms=perception_latency_ms(args),
+                                                      cameras=tuple(args.cameras)))
+    from mmact_ctrl.perception import OracleSensor
+
+    return OracleSensor(world, perception_hz(args), perception_latency_ms(args), dt_s)
 
 
 def make_source(args: argparse.Namespace):
@@ -195,6 +236,11 @@ def run(args: argparse.Namespace) -> dict:
     source = make_source(args)
     world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
                        plane_z_m=plane_z_m, instruction=args.instruction)
+    try:
+        sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
+    except ValueError:
+        world.close()
+        raise
     runs: dict[str, dict] = {}
     first_logs = {}
     total = len(configs) * args.episodes
@@ -206,7 +252,7 @@ def run(args: argparse.Namespace) -> dict:
             for i in range(args.episodes):
                 seed = args.seed + i
                 fps = 30.0 if (args.video and i == 0) else 0.0
-                log = run_episode(world, source, controller, seed=seed, video_fps=fps)
+                log = run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor)
                 m = episode_metrics(log)
                 m["mode"] = mode
                 episodes.append(m)
@@ -222,6 +268,7 @@ def run(args: argparse.Namespace) -> dict:
             }
     finally:
         bar.close()
+        getattr(sensor, "close", lambda: None)()
         world.close()
     last = args.mode[-1]
     payload = {

@@ -121,7 +121,7 @@ def test_vectorized_preview_equals_pointwise_reference(rule):
     np.testing.assert_allclose(ctrl.reference_positions(times), np.array([ctrl.reference(t)[0] for t in times]))
     wp = np.zeros((16, 7))
     wp[:, :3] = np.linspace([0.3, 0.0, 0.5], [0.52, 0.12, 0.21], 16)
-    ctrl.activate(ActionChunk(waypoints=wp, dt_s=0.1, t0_s=0.1), 0.3, ctrl.target_estimate())
+    ctrl.activate(ActionChunk(waypoints=wp, dt_s=0.1, t0_s=0.1), 0.3, ctrl.target_estimate(0.29))
     preview = ctrl.reference_positions(times)
     np.testing.assert_allclose(preview, np.array([ctrl.reference(t)[0] for t in times]), atol=1e-12)
     assert (rule == "none") != ctrl._trusted  # the retargeting branch was exercised for snap / displacement
