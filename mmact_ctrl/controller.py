@@ -130,7 +130,7 @@ class HybridController:
     def activate(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> None:
         """Make ``chunk`` the active chunk at ``t_s`` (its observation time + latency); ends a watchdog stop."""
         self.stop = None
-        target_at_obs_m = self.filter.estimate_at_observation(chunk.t0_s, target_at_obs_m)
+        target_at_obs_m = self._target_at_observation(chunk.t0_s, target_at_obs_m)
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
         # snap's blend ends at the last waypoint that will actually run: the next chunk is due one replan period on
@@ -150,10 +150,19 @@ class HybridController:
             gap = min(gap, float(np.linalg.norm(start - self._smoothed_pos)))
         return gap
 
+    def _target_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:
+        """Where the target was at the chunk's observation time, as best known now: the estimate recorded then
+        (corrected for a jump the observation already saw, ``estimate_at_observation``), or, when there was none
+        yet (the first measurement arrived after the observation: a sensor latency), the current estimate
+        extrapolated back to ``t0_s``."""
+        if recorded_m is None and self.filter.initialized:
+            return self.filter.predict_pos(t0_s)
+        return self.filter.estimate_at_observation(t0_s, recorded_m)
+
     def start_position(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> np.ndarray:
         """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, retargeting
         included (what the splice check compares with the reference being executed)."""
-        target_at_obs_m = self.filter.estimate_at_observation(chunk.t0_s, target_at_obs_m)
+        target_at_obs_m = self._target_at_observation(chunk.t0_s, target_at_obs_m)
         ref = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         pos = ref.sample(t_s)[0][:3]
         if self.hybrid and self.filter.initialized and trusted(self.config.retarget, ref.aim_pos_m, target_at_obs_m):
