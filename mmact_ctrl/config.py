@@ -47,7 +47,9 @@ class StackConfig:
             chunk has run out) the reference brakes to rest within the smoother's limits and holds, s.
         splice_radius_m: a chunk whose position at its activation is farther than this from the reference
             being executed is rejected (the previous chunk keeps running), m.
-        plan_resync_m, plan_resync_m_s: an MPC plan starts from the state being tracked unless the TCP is
+        mpc_plan_start: hybrid with MPC: where each plan starts, ``measured`` (the robot's state) or ``tracked``
+            (the previous plan's state now; see ``HybridController._plan_start``).
+        plan_resync_m, plan_resync_m_s: ``tracked``: a plan starts from the state being tracked unless the TCP is
             farther than this from it (then from the measured state), m and m/s.
         abort_after_missed_ticks: this many missed control ticks in a row abort the episode, as on the Panda
             (``communication_constraints_violation``).
@@ -72,6 +74,7 @@ class StackConfig:
     ensemble_decay_per_s: float = 1.0
     chunk_timeout_s: float = 2.5
     splice_radius_m: float = 0.1
+    mpc_plan_start: str = "measured"
     plan_resync_m: float = 0.02
     plan_resync_m_s: float = 0.25
     abort_after_missed_ticks: int = 20
@@ -105,6 +108,8 @@ class StackConfig:
             raise ValueError(f"chunk_timeout_s must be a finite number > 0, got {self.chunk_timeout_s}")
         if not self.splice_radius_m > 0:
             raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
+        if self.mpc_plan_start not in ("measured", "tracked"):
+            raise ValueError(f"mpc_plan_start must be 'measured' or 'tracked', got {self.mpc_plan_start!r}")
         if not (self.plan_resync_m > 0 and self.plan_resync_m_s > 0):
             raise ValueError(f"plan_resync_m and plan_resync_m_s must be > 0, got {self.plan_resync_m}, "
                              f"{self.plan_resync_m_s}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mmact_ctrl.perception import OracleSensor
+from mmact_ctrl.perception import Measurement, OracleSensor
 
 
 class _Truth:
@@ -33,9 +33,16 @@ def test_oracle_sensor_rate_and_latency():
         assert m.pos_m[0] == pytest.approx(0.5 + 0.2 * m.t_capture_s)  # the scene at capture time
 
 
-def test_latency_compensation_in_the_loop_keeps_the_hybrid_final_error():
-    """Linear target, expert, hybrid: a 100 ms sensor latency, fused at capture time and predicted to now, costs
-    little final error against no latency (the filter does not treat a late measurement as a current one)."""
+class _Naive(OracleSensor):
+    """A latency the filter is not told about: each measurement is stamped with its arrival time."""
+
+    def poll(self, t_s):
+        return [Measurement(m.t_arrival_s, m.t_arrival_s, m.pos_m) for m in super().poll(t_s)]
+
+
+def test_latency_compensation_in_the_loop_beats_treating_late_measurements_as_current():
+    """Linear target, expert, hybrid, 100 ms sensor latency: fused at capture time and predicted to now, the
+    tracking error stays below that of a filter that takes each late measurement for a current one."""
     from mmact_ctrl.config import StackConfig
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
@@ -44,14 +51,22 @@ def test_latency_compensation_in_the_loop_keeps_the_hybrid_final_error():
 
     world = make_world("linear", 0.2, n_objects=1)
     errors = {}
-    for latency_ms in (0.0, 100.0):
+    for name, sensor in (("none", OracleSensor(world, 100.0, 0.0, 0.001)), ("compensated", OracleSensor(world, 100.0, 100.0, 0.001)),
+                         ("naive", _Naive(world, 100.0, 100.0, 0.001))):
         ctrl = HybridController(StackConfig(duration_s=4.0))
-        sensor = OracleSensor(world, 100.0, latency_ms, 0.001)
-        errors[latency_ms] = [episode_metrics(run_episode(world, make_expert(), ctrl, seed, sensor=sensor))["final_error_m"]
-                              for seed in (0, 1)]
+        errors[name] = []
+        for seed in (0, 1, 2, 3):
+            log = run_episode(world, make_expert(), ctrl, seed, sensor=sensor)
+            assert episode_metrics(log)["success"]
+            err = np.linalg.norm(log.ee_pos_m - log.target_pos_m, axis=1)
+            errors[name].append(float(err[2000:].mean()))  # tracking, after the approach
     world.close()
-    assert np.mean(errors[0.0]) < 0.012
-    assert np.mean(errors[100.0]) < np.mean(errors[0.0]) + 0.005, errors
+    mean = {k: float(np.mean(v)) for k, v in errors.items()}
+    assert mean["none"] < 0.012, mean
+    assert mean["compensated"] < mean["none"] + 0.012, mean
+    # measured: none 6.1, compensated 14.1, naive 18.2 mm (cv): the constant-velocity extrapolation over the
+    # latency costs noise, the naive filter a lag
+    assert mean["compensated"] < 0.85 * mean["naive"], mean
 
 
 @pytest.mark.parametrize("bad", [["--perception-hz", "0"], ["--perception-latency-ms", "-5"],
