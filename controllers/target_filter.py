@@ -1,5 +1,9 @@
 """Kalman filter on the target position (filterpy), from noisy, sometimes missing measurements.
 
+The stack runs ``controllers.target_estimator.TargetEstimator`` (capture-time fusion, cv/ca/imm); this fixed-step
+filter stays as its zero-latency reference: with model cv the estimator reproduces it to rounding, which
+``tests/test_target_estimator.py`` holds.
+
 Constant-velocity (default) or constant-acceleration model per axis.
 
 Every measurement passes a gate before it may touch the filter; what is gated is counted, never fused:

@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Issue 13 figures: camera perception, latency compensation, curving targets (expert source, hybrid).
+cd "$(dirname "$0")/../.."
+. .venv/bin/activate
+mt="python -m scenarios.moving_target --source expert --mode hybrid --episodes 20 --quiet"
+out=docs/perception
+for tgt in linear static jump; do
+  $mt --target $tgt --perception camera --json $out/camera_$tgt.json > $out/camera_$tgt.txt
+done
+$mt --target linear --perception-latency-ms 0 --json $out/oracle_lat0.json > $out/oracle_lat0.txt
+$mt --target linear --perception-latency-ms 100 --json $out/oracle_lat100.json > $out/oracle_lat100.txt
+for f in cv imm; do
+  $mt --target circle --speed 0.4 --filter $f --json $out/circle_$f.json > $out/circle_$f.txt
+done
+$mt --target linear --filter imm --json $out/linear_imm.json > $out/linear_imm.txt
+$mt --target jump --filter imm --json $out/jump_imm.json > $out/jump_imm.txt
+echo PERCEPTION DONE
