@@ -96,7 +96,7 @@ class EstimatorConfig:
     init_vel_std_m_s: float = 0.5
     init_acc_std_m_s2: float = 1.0
     history_s: float = 0.5
-    reset_gate: float = 40.0
+    reset_gate: float = 60.0
     reset_after: int = 2
     jump_agree_m: float = 0.016
     frozen_gate: bool = True

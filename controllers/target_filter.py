@@ -48,7 +48,7 @@ class FilterConfig:
     meas_noise_m: float = 0.002
     accel_noise_m_s2: float = 2.0
     init_vel_std_m_s: float = 0.5
-    reset_gate: float = 40.0
+    reset_gate: float = 60.0
     reset_after: int = 2
     jump_agree_m: float = 0.016
     frozen_gate: bool = True

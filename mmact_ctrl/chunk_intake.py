@@ -126,6 +126,8 @@ class ChunkIntake:
 
     def due(self, t_s: float) -> list[Pending]:
         """The queued chunks whose activation time has come (oldest first), removed from the queue."""
+        if not self.pending or self.pending[0].t_active_s > t_s:
+            return []  # the 1 kHz common case: nothing due, nothing allocated
         n = 0
         while n < len(self.pending) and self.pending[n].t_active_s <= t_s:
             n += 1

@@ -140,14 +140,17 @@ class HybridController:
 
     def splice_distance_m(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> float:
         """How far the reference would jump at ``t_s`` if ``chunk`` became active now, m: the distance from where it
-        would start (retargeting included, :meth:`start_position`) to the reference being executed. In hybrid with
-        Ruckig, any jump of the raw reference is absorbed and smoothed away, so the start may be near either the
-        raw reference (e.g. both retargeted onto a target that jumped) or the smoothed one (the new chunk starts
-        where the robot is while the raw reference already snapped ahead): the smaller distance counts."""
+        would start (retargeting included, :meth:`start_position`) to the nearest of what the robot is following
+        or doing now: the raw reference, the Ruckig-smoothed one (hybrid: any jump of the raw reference is absorbed
+        and smoothed away, so a start near either is no jump) and the TCP itself (a chunk that starts where the arm
+        is, as a source planning from the observed state does while a fast arm lags its reference, asks for no jump
+        of the arm)."""
         start = self.start_position(chunk, t_s, target_at_obs_m)
         gap = float(np.linalg.norm(start - self.reference(t_s)[0]))
         if self.hybrid and self.config.use_ruckig and self._smoothed_pos is not None:
             gap = min(gap, float(np.linalg.norm(start - self._smoothed_pos)))
+        if self.terms is not None:
+            gap = min(gap, float(np.linalg.norm(start - self.terms.pos_m)))
         return gap
 
     def _target_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:

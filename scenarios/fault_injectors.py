@@ -242,7 +242,8 @@ class _WorldWrapper:
 class FaultyPerception(_WorldWrapper):
     """``measure_target`` spoiled in ``window``: ``dropout`` (None with probability 0.5, on top of the world's
     own), ``frozen`` (the last value before the onset, bit-identical), ``outlier`` (10 % of the measurements are
-    the truth + a 10-sigma offset in a random direction, sigma = the world's ``noise_m``, at least 2 mm), ``nan``
+    the truth + a 10-sigma offset in a random direction, sigma = the innovation's standard deviation, about
+    1.25 x the world's ``noise_m`` (at least 2 mm) for the filter in steady state: 25 mm at the default noise), ``nan``
     (every 5th measurement of the window is NaN, every 7th +inf). Its random draws are seeded per episode by
     ``reset(seed)``."""
 
@@ -289,7 +290,7 @@ class FaultyPerception(_WorldWrapper):
             u = self._rng.normal(size=3)
             u /= np.linalg.norm(u)
             self.faulty_measurements += 1
-            return np.asarray(self._inner.target_pos_m(), dtype=np.float64) + 10.0 * sigma * u
+            return np.asarray(self._inner.target_pos_m(), dtype=np.float64) + 12.5 * sigma * u
         # nan
         if self._n_window % 5 == 0:
             self.faulty_measurements += 1

@@ -297,10 +297,10 @@ def test_gates_nonfinite_frozen_and_outlier_and_a_15_cm_jump_reinitialises(model
     assert step(0.52, z.copy()) == "frozen" and step(0.53, z.copy()) == "frozen" and est.gated_frozen == 2
     for k in range(10):
         step(0.54 + 0.01 * k, truth + rng.normal(0, 0.002, 3))
-    for k in range(20):  # scattered 10-sigma outliers (every 5th measurement) never move it
+    for k in range(20):  # scattered 10-sigma outliers (25 mm: 10 x the innovation's 2.5 mm; every 5th measurement) never move it
         t = 0.64 + 0.05 * k
         direction = rng.normal(size=3)
-        assert step(t, truth + 0.02 * direction / np.linalg.norm(direction)) == "outlier"
+        assert step(t, truth + 0.025 * direction / np.linalg.norm(direction)) == "outlier"
         for i in range(1, 5):
             step(t + 0.01 * i, truth + rng.normal(0, 0.002, 3))
     assert est.gated_outlier == 20 and est.gated == 6 + 2 + 20
