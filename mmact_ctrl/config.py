@@ -124,8 +124,3 @@ class StackConfig:
             raise ValueError(
                 f"latency_ms={self.latency_ms:g} is not shorter than the episode ({self.duration_s:g} s): no chunk would ever run"
             )
-
-    @property
-    def perception_every(self) -> int:
-        """Physics steps per perception tick."""
-        return max(1, int(round(1.0 / (self.perception_hz * self.dt_s))))
