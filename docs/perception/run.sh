@@ -14,4 +14,5 @@ for f in cv imm; do
 done
 $mt --target linear --filter imm --json $out/linear_imm.json > $out/linear_imm.txt
 $mt --target jump --filter imm --json $out/jump_imm.json > $out/jump_imm.txt
+for lat in 0 100; do $mt --target linear --filter imm --perception-latency-ms $lat --json $out/oracle_imm_lat$lat.json > $out/oracle_imm_lat$lat.txt; done
 echo PERCEPTION DONE
