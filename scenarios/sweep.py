@@ -11,7 +11,8 @@ latency_ms x target x speed_m_s x bins x seed):
 - ``speed``:   open_loop / hybrid vs target speed (1 Hz);
 - ``latency``: open_loop / hybrid vs latency (1 Hz);
 - ``bins``:    the quantization trap, 64 to 8192 bins and none (static target, open_loop and hybrid);
-- ``jump``:    the change of mind: the target teleports mid-chunk (1 Hz).
+- ``jump``:    the change of mind: the target teleports mid-chunk (1 Hz);
+- ``perception``: hybrid with the oracle target channel vs the camera (30 Hz, 50 ms; linear, 0.2 m/s, 1 Hz).
 
 One episode per cell; each result is a JSON file under ``OUT/cells/`` so an interrupted sweep
 resumes where it stopped. ``OUT/results.csv`` has one row per episode (every grid axis and every
@@ -35,7 +36,8 @@ import numpy as np
 
 from mmact_ctrl.config import MODES
 
-AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed")
+AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception")
+PERCEPTIONS: tuple[str, ...] = ("oracle", "camera")
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,7 @@ class Study:
     speed_m_s: tuple[float, ...]
     bins: tuple[int, ...]
     seeds: tuple[int, ...]
+    perception: tuple[str, ...] = ("oracle",)
 
     def __post_init__(self) -> None:
         bad = [m for m in self.modes if m not in MODES]
@@ -65,12 +68,17 @@ class Study:
             raise ValueError(f"study {self.name!r}: bins must be 0 or >= 2, got {self.bins}")
         if not self.seeds:
             raise ValueError(f"study {self.name!r}: needs at least one seed")
+        bad = [x for x in self.perception if x not in PERCEPTIONS]
+        if bad or not self.perception:
+            raise ValueError(f"study {self.name!r}: perception must be some of {PERCEPTIONS}, got {self.perception}")
 
     def cells(self) -> list[dict]:
         return [
-            dict(study=self.name, mode=m, replan_hz=f, latency_ms=lat, target=tg, speed_m_s=sp, bins=b, seed=sd)
-            for m, f, lat, tg, sp, b, sd in product(
-                self.modes, self.replan_hz, self.latency_ms, self.target, self.speed_m_s, self.bins, self.seeds
+            dict(study=self.name, mode=m, replan_hz=f, latency_ms=lat, target=tg, speed_m_s=sp, bins=b, seed=sd,
+                 perception=pc)
+            for m, f, lat, tg, sp, b, sd, pc in product(
+                self.modes, self.replan_hz, self.latency_ms, self.target, self.speed_m_s, self.bins, self.seeds,
+                self.perception,
             )
         ]
 
@@ -91,11 +99,13 @@ def default_grid(quick: bool = False, seeds: int = 3) -> list[Study]:
         Study("latency", ("open_loop", "hybrid"), (1.0,), (0.0, 100.0, 400.0), ("linear",), (0.3,), (2048,), s),
         Study("bins", ("open_loop", "hybrid"), (1.0,), (200.0,), ("static",), (0.0,), (64, 256, 1024, 2048, 8192, 0), s),
         Study("jump", ("open_loop", "hybrid"), (1.0,), (200.0,), ("jump",), (0.0,), (2048,), tuple(range(3 * seeds))),
+        Study("perception", ("hybrid",), (1.0,), (200.0,), ("linear",), (0.2,), (2048,), s, PERCEPTIONS),
     ]
 
 
 def cell_key(cell: dict, duration_s: float) -> str:
-    text = json.dumps({**{k: cell[k] for k in AXES if k != "study"}, "duration_s": duration_s,
+    text = json.dumps({**{k: cell[k] for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
+                       **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
                           if cell.get("source", "expert") != "expert" else {})}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
@@ -131,10 +141,18 @@ def run_cell(cell: dict, duration_s: float) -> dict:
         from controllers.robot_model import PandaModel
 
         _CACHE["model"] = PandaModel()
+    sensor = None
+    if cell.get("perception", "oracle") == "camera":  # the ball measured in rendered frames (30 Hz, 50 ms)
+        skey = ("camera", wkey)
+        if skey not in _CACHE:
+            from scenarios.camera_sensor import CameraSensor, CameraSensorConfig
+
+            _CACHE[skey] = CameraSensor(_CACHE[wkey], CameraSensorConfig())
+        sensor = _CACHE[skey]
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
-                      duration_s=duration_s)
+                      duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0)
     controller = HybridController(cfg, model=_CACHE["model"])
-    log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"])
+    log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"], sensor=sensor)
     m = episode_metrics(log)
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)

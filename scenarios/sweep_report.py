@@ -187,4 +187,10 @@ def write_report(rows: list[dict], out: Path, wall_s: float, resumed: int = 0) -
     g = _group(rows, "jump", "replan_hz")
     if g:
         parts += ["## jump target", "", _pivot_table(g, "replan frequency [Hz]"), ""]
+    g = _group(rows, "perception", "perception")
+    if g:
+        parts += ["## perception (linear target, 0.2 m/s, 1 Hz)", "",
+                  "The hybrid layer's target channel: the oracle (truth + 2 mm noise, 100 Hz) vs the camera (the ball "
+                  "measured in rendered depth + segmentation frames, 30 Hz, 50 ms latency, occlusion).", "",
+                  _pivot_table(g, "perception", str), ""]
     (out / "report.md").write_text("\n".join(parts))

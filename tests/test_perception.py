@@ -79,3 +79,18 @@ def test_cli_rejects_bad_perception_values_in_one_line(bad, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and (bad[-1] in err[0] or bad[0] in err[0]), err
+
+
+def test_sweep_has_a_perception_axis():
+    from scenarios.sweep import Study, default_grid, run_cell
+
+    study = Study("perception", ("hybrid",), (1.0,), (200.0,), ("linear",), (0.2,), (2048,), (0,), ("oracle", "camera"))
+    cells = study.cells()
+    assert [c["perception"] for c in cells] == ["oracle", "camera"]
+    rows = [run_cell(c, 1.5) for c in cells]
+    assert [r["perception"] for r in rows] == ["oracle", "camera"]
+    assert rows[1]["sensor_ms_per_sim_s"] > 10 * rows[0]["sensor_ms_per_sim_s"]  # the camera really rendered
+    assert all(r["limit_violations"] == 0 for r in rows)
+    assert any(s.name == "perception" for s in default_grid())
+    with pytest.raises(ValueError, match="perception"):
+        Study("x", ("hybrid",), (1.0,), (0.0,), ("linear",), (0.2,), (0,), (0,), ("lidar",))
