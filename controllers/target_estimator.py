@@ -629,6 +629,19 @@ class TargetEstimator:
             return np.zeros(3)
         return self._model.extrapolate_vel(self._state, np.array([float(t_s) - self.t_s]))[0]
 
+    def filtered_at(self, t_s: float) -> np.ndarray | None:
+        """The estimate of the position at ``t_s`` from the measurements *captured* up to ``t_s`` only, as known now:
+        with a sensor latency, the estimate taken at ``t_s`` itself had to extrapolate over the latency, this one
+        (from the history) did not. None when the history does not reach back to ``t_s`` or no estimate existed then;
+        the current estimate extrapolated when every stored capture is at or before ``t_s``."""
+        for entry in self._history:
+            if entry.t_s > t_s:
+                state, initialized, t_state = entry.before[0], entry.before[1], entry.before[2]
+                if not initialized or state is None or t_state > t_s:
+                    return None
+                return self._model.extrapolate(state, np.array([t_s - t_state]))[0]
+        return self.predict_pos(t_s) if self.initialized else None
+
     def estimate_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:
         """The best estimate of where the target was at an observation time ``t0_s``, given what is known now
         (``TargetFilter.estimate_at_observation``'s semantics, on capture times).

@@ -154,13 +154,15 @@ class HybridController:
         return gap
 
     def _target_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:
-        """Where the target was at the chunk's observation time, as best known now: the estimate recorded then
-        (corrected for a jump the observation already saw, ``estimate_at_observation``), or, when there was none
-        yet (the first measurement arrived after the observation: a sensor latency), the current estimate
-        extrapolated back to ``t0_s``."""
-        if recorded_m is None and self.filter.initialized:
-            return self.filter.predict_pos(t0_s)
-        return self.filter.estimate_at_observation(t0_s, recorded_m)
+        """Where the target was at the chunk's observation time, as best known now: the filter's estimate from the
+        measurements captured up to ``t0_s`` (``filtered_at``: with a sensor latency the estimate recorded at
+        ``t0_s`` had to extrapolate over the latency, this one did not; with no latency they are the same), else the
+        one recorded then, else the current estimate extrapolated back; then corrected for a jump the observation
+        already saw (``estimate_at_observation``)."""
+        best = self.filter.filtered_at(t0_s) if self.filter.initialized else None
+        if best is None:
+            best = recorded_m if recorded_m is not None else (self.filter.predict_pos(t0_s) if self.filter.initialized else None)
+        return self.filter.estimate_at_observation(t0_s, best)
 
     def start_position(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> np.ndarray:
         """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, retargeting

@@ -346,3 +346,27 @@ def test_imm_with_irregular_stamps_and_a_dropout():
         if t > 1.0:
             errs.append(np.linalg.norm(est.predict_pos(t + 0.01) - _circle(t + 0.01)))
     assert _rms_mm(errs) < 4.0 and abs(est.mode_probs.sum() - 1.0) < 1e-12
+
+
+def test_filtered_at_a_past_time_uses_only_what_was_captured_by_then():
+    """With a 100 ms latency, the estimate at t from the history (captures up to t) beats the one that had to be
+    extrapolated over the latency at t; with every capture at or before t it is the current extrapolation."""
+    est = TargetEstimator(EstimatorConfig())
+    rng = np.random.default_rng(3)
+    truth = lambda t: np.array([0.5 + 0.2 * t, 0.1, 0.2])  # noqa: E731
+    recorded, errs_recorded, errs_filtered = {}, [], []
+    for k in range(200):  # measurements captured every 10 ms, arriving 100 ms later
+        t = 0.01 * k
+        if k >= 10:
+            tc = t - 0.1
+            est.fuse(tc, truth(tc) + rng.normal(0, 0.002, 3))
+        if est.initialized:
+            recorded[round(t, 3)] = est.predict_pos(t)  # what an observation at t could record
+    for k in range(150, 180):  # at t + 0.2 s, ask again for t
+        t = 0.01 * k
+        errs_recorded.append(np.linalg.norm(recorded[round(t, 3)] - truth(t)))
+    # replay at the end: the history holds the last 0.5 s
+    for t in np.arange(1.6, 1.8, 0.01):
+        errs_filtered.append(np.linalg.norm(est.filtered_at(float(t)) - truth(float(t))))
+    assert np.mean(errs_filtered) < np.mean(errs_recorded)
+    assert np.allclose(est.filtered_at(5.0), est.predict_pos(5.0))
