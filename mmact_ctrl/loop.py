@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from controllers.safety import CommandLimits, SafetyMonitor
+from controllers.safety import NONFINITE, CommandLimits, SafetyMonitor
 from mmact_ctrl.chunk import ChunkSource, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
@@ -255,7 +255,7 @@ def run_episode(
             log.missed_ticks += 1
             out = controller.missed_tick(state.q_rad, state.dq_rad_s)
         mask = monitor.check(out.tau_nm, state.q_rad, state.dq_rad_s, out.ddq_cmd_rad_s2, out.tcp_vel_m_s)
-        tau = out.tau_nm if (mask & 1) == 0 else controller.qp.tau_last  # never send a non-finite torque
+        tau = out.tau_nm if not mask & NONFINITE else controller.qp.tau_last  # never send a non-finite torque
         log.safety_mask[k] = mask
         log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + perception_us
         log.ee_pos_m[k] = state.ee_pos_m

@@ -80,6 +80,8 @@ class OracleSensor:
             self.missed += z is None
             self._queue.append(Measurement(t_s, t_s + self.latency_s, None if z is None else np.asarray(z, dtype=float)))
         self._k += 1
+        if not self._queue or self._queue[0].t_arrival_s > t_s + 0.5 * self._dt:
+            return []  # most ticks: nothing has arrived
         out = []
         while self._queue and self._queue[0].t_arrival_s <= t_s + 0.5 * self._dt:
             out.append(self._queue.popleft())

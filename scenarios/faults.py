@@ -339,37 +339,35 @@ def _cell_text(c: dict) -> str:
     return text
 
 
-def fault_tables(cells: list[dict], faults: list[str], modes: list[str], sources: list[str]) -> dict[str, str]:
-    """A markdown fault x mode table per source."""
+def _tables(cells: list[dict], faults: list[str], modes: list[str], sources: list[str], cell_text) -> dict[str, str]:
+    """A markdown fault x mode table per source; ``cell_text(cell)`` formats one cell ("-" where none ran)."""
     index = {(c["source"], c["fault"], c["mode"]): c for c in cells}
     tables = {}
     for src in sources:
         lines = ["| fault | " + " | ".join(modes) + " |", "|---|" + "---|" * len(modes)]
         for f in faults:
-            lines.append(f"| {f} | " + " | ".join(_cell_text(index[(src, f, m)]) if (src, f, m) in index else "-"
+            lines.append(f"| {f} | " + " | ".join(cell_text(index[(src, f, m)]) if (src, f, m) in index else "-"
                                                    for m in modes) + " |")
         tables[src] = "\n".join(lines)
     return tables
 
 
+def _recovery_text(c: dict) -> str:
+    if not c["applicable"]:
+        return "n/a"
+    if c["recovered"]:
+        return f"{c['recovery_s_median']:.2f} ({c['recovered']}/{c['episodes']})"
+    return f"never (0/{c['episodes']})"
+
+
+def fault_tables(cells: list[dict], faults: list[str], modes: list[str], sources: list[str]) -> dict[str, str]:
+    """Success (and violations, exceptions, aborts) per fault x mode, one table per source."""
+    return _tables(cells, faults, modes, sources, _cell_text)
+
+
 def recovery_tables(cells: list[dict], faults: list[str], modes: list[str], sources: list[str]) -> dict[str, str]:
-    index = {(c["source"], c["fault"], c["mode"]): c for c in cells}
-    tables = {}
-    for src in sources:
-        lines = ["| fault | " + " | ".join(modes) + " |", "|---|" + "---|" * len(modes)]
-        for f in faults:
-            parts = []
-            for m in modes:
-                c = index.get((src, f, m))
-                if c is None or not c["applicable"]:
-                    parts.append("n/a" if c is not None else "-")
-                elif c["recovered"]:
-                    parts.append(f"{c['recovery_s_median']:.2f} ({c['recovered']}/{c['episodes']})")
-                else:
-                    parts.append(f"never (0/{c['episodes']})")
-            lines.append(f"| {f} | " + " | ".join(parts) + " |")
-        tables[src] = "\n".join(lines)
-    return tables
+    """Median recovery time (episodes recovered / episodes) per fault x mode, one table per source."""
+    return _tables(cells, faults, modes, sources, _recovery_text)
 
 
 def success_costs(cells: list[dict], faults: list[str], modes: list[str], sources: list[str],
