@@ -22,6 +22,9 @@ class Observation:
         target_pos_m: where the instructed target is in this frame (3,), m; what one camera frame shows.
         image: camera frame(s) ``(V, H, W, 3)`` uint8, or None when the source does not need pixels.
         instruction: the language instruction, or "" when there is none.
+        target_prev_pos_m: where the target was in the frame ``frame_gap_s`` earlier (3,), m (a second frame, from
+            which a source may estimate the target's velocity; at the start of an episode, the first frame).
+        frame_gap_s: time between that earlier frame and this one, s (0 when there is no earlier frame yet).
     """
 
     t0_s: float
@@ -33,6 +36,8 @@ class Observation:
     target_pos_m: np.ndarray
     image: np.ndarray | None = None
     instruction: str = ""
+    target_prev_pos_m: np.ndarray | None = None
+    frame_gap_s: float = 0.0
 
 
 @dataclass(frozen=True)

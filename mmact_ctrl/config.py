@@ -11,9 +11,12 @@ from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
 from controllers.target_estimator import EstimatorConfig
 
-MODES: tuple[str, ...] = ("open_loop", "receding", "temporal_ensemble", "inpaint", "hybrid")
-#: modes that execute chunks without the control layer's corrections (the baselines from the field).
-BASELINE_MODES: tuple[str, ...] = ("open_loop", "receding", "temporal_ensemble", "inpaint")
+from mmact_ctrl.executors.registry import EXECUTORS
+
+#: the built-in ways of executing chunks (``mmact_ctrl.executors``), baselines first, ours last.
+MODES: tuple[str, ...] = tuple(EXECUTORS)
+#: modes that execute chunks without our control layer (the baselines from the field).
+BASELINE_MODES: tuple[str, ...] = tuple(m for m in MODES if m != "hybrid")
 
 
 @dataclass(frozen=True)
@@ -28,7 +31,10 @@ class StackConfig:
             ``temporal_ensemble``: overlapping chunks are averaged with exponential weights, the oldest
             weighing most (ACT); ``inpaint``: real-time chunking: the waypoints that will run while the
             next chunk is computed are given to the source as known and the rest is filled in, so chunks
-            join without a jump; ``hybrid``: ours, Kalman-filtered retargeting + Ruckig + QP.
+            join without a jump; ``residual``: an A2C2-style learned correction from the latest target
+            measurements, tracked by the QP; ``hybrid``: ours, Kalman-filtered retargeting + Ruckig + MPC + QP.
+            Each is one class in ``mmact_ctrl.executors``.
+        residual_checkpoint: residual: the ``policy.residual`` checkpoint ("" = the shipped one).
         use_ruckig: hybrid only: smooth the reference with Ruckig.
         use_mpc: hybrid only: a CasADi MPC between Ruckig and the QP previews the reference
             (retargeted chunk + predicted target) over ``mpc.horizon_steps * mpc.dt_s`` within
@@ -80,6 +86,7 @@ class StackConfig:
     abort_after_missed_ticks: int = 20
     mpc_keep_plan_s: float = 0.1
     mpc_blend_s: float = 0.02
+    residual_checkpoint: str = ""
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: EstimatorConfig = field(default_factory=EstimatorConfig)

@@ -1,4 +1,5 @@
-"""The 1 kHz control layer under the chunk source: reference -> (retarget) -> (Ruckig) -> QP -> torques."""
+"""The 1 kHz control layer under the chunk source: executor reference (+ its correction: retargeting, a learned
+residual) -> (Ruckig) -> (MPC) -> QP -> torques."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ import numpy as np
 
 from controllers.mpc import MPCPlan, TaskSpaceMPC
 from controllers.qp_id import TaskReference, TaskSpaceQP, commanded_accel
-from controllers.retarget import retarget_offset, retarget_offsets, trusted
 from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import orientation_error, rot_from_rotvec, rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
@@ -17,6 +17,7 @@ from controllers.target_estimator import TargetEstimator
 from controllers.tick_kernels import sample_plan_task
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
+from mmact_ctrl.executors import ChunkExecutor, make_executor
 from mmact_ctrl.reference import ChunkReference
 
 GRIPPER_OPEN_M = 0.08
@@ -44,14 +45,26 @@ class TickOutput:
 
 
 class HybridController:
-    """Executes chunks at the control rate with the layers the ``StackConfig`` switches on."""
+    """Executes chunks at the control rate: the episode's chunk executor (``mmact_ctrl.executors``, one per
+    ``StackConfig.mode``) gives the reference and says which layers run under it; the ``StackConfig`` switches
+    each layer off. This class knows no mode names."""
 
-    def __init__(self, config: StackConfig, model: PandaModel | None = None) -> None:
+    def __init__(self, config: StackConfig, model: PandaModel | None = None,
+                 executor: ChunkExecutor | None = None) -> None:
+        """Args:
+            config: the stack's configuration.
+            model: the robot model (None: the Panda's).
+            executor: how chunks are executed (None: the built-in executor named ``config.mode``); any object that
+                satisfies ``mmact_ctrl.executors.ChunkExecutor``.
+        """
         self.config = config
         self.model = model if model is not None else PandaModel()
         self.qp = TaskSpaceQP(replace(config.qp, dt_s=config.dt_s))
-        self.hybrid = config.mode == "hybrid"
-        self.use_mpc = self.hybrid and config.use_mpc
+        self.executor = executor if executor is not None else make_executor(config.mode)
+        layers = self.executor.layers
+        self.reads_target = layers.reads_target
+        self.smoothing = layers.smooth and config.use_ruckig
+        self.use_mpc = layers.preview and config.use_mpc
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         smoother_dt_s = 1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s
         self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
@@ -65,10 +78,6 @@ class HybridController:
         self.q_post = self.model.home_q_rad
         _, self.rot_nominal = self.model.fk(self.q_post)
         self.active: ChunkReference | None = None
-        self.ensemble: list[ChunkReference] = []  # temporal_ensemble: every chunk still covering the future
-        self._ensemble_mode = config.mode == "temporal_ensemble"
-        self._trusted = False
-        self._blend_end_s = 0.0
         self._hold_pos = np.zeros(3)
         self._hold_rotvec = np.zeros(3)
         self._gripper_m = GRIPPER_OPEN_M
@@ -79,6 +88,12 @@ class HybridController:
         self.plan_resyncs = 0  # MPC plans started from the measured state because the robot left the tracked one
         self.mpc_bypass_ticks = 0  # ticks tracking the smoothed reference directly: no good MPC plan covered them
         self._good_plan_end_s = 0.0
+        self.executor.bind(self)
+
+    @property
+    def mode(self) -> str:
+        """The executor's name (``StackConfig.mode`` unless an executor was given)."""
+        return self.executor.name
 
     # ---- episode -----------------------------------------------------------
     def reset(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None) -> np.ndarray:
@@ -107,8 +122,8 @@ class HybridController:
         if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
             self.mpc.reset()
         self.active = None
-        self.ensemble = []
-        self._trusted = False
+        self.terms = None
+        self.executor.reset()
         return tau_start
 
     def ee_pose(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,8 +135,9 @@ class HybridController:
     def perceive(self, t_capture_s: float, z_m: np.ndarray | None) -> None:
         """Fuse one target measurement of the scene as it was at ``t_capture_s`` (None = missed); it may arrive
         later than that (sensor latency): the filter fuses it at its capture time and predicts to now."""
-        if self.hybrid:
+        if self.reads_target:
             self.filter.fuse(t_capture_s, z_m)
+            self.executor.perceive(t_capture_s, z_m)
 
     def target_estimate(self, t_s: float) -> np.ndarray | None:
         """The filtered target estimate predicted to ``t_s`` (None before the first measurement)."""
@@ -132,22 +148,18 @@ class HybridController:
         self.stop = None
         target_at_obs_m = self._target_at_observation(chunk.t0_s, target_at_obs_m)
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
-        self._trusted = self.hybrid and trusted(self.config.retarget, self.active.aim_pos_m, target_at_obs_m)
-        # snap's blend ends at the last waypoint that will actually run: the next chunk is due one replan period on
-        self._blend_end_s = min(self.active.t_last_s, t_s + 1.0 / self.config.replan_hz)
-        if self._ensemble_mode:
-            self.ensemble = [c for c in self.ensemble if c.t_last_s > t_s] + [self.active]
+        self.executor.activate(self.active, t_s)
 
     def splice_distance_m(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> float:
         """How far the reference would jump at ``t_s`` if ``chunk`` became active now, m: the distance from where it
-        would start (retargeting included, :meth:`start_position`) to the nearest of what the robot is following
-        or doing now: the raw reference, the Ruckig-smoothed one (hybrid: any jump of the raw reference is absorbed
+        would start (the executor's correction included, :meth:`start_position`) to the nearest of what the robot is
+        following or doing now: the raw reference, the Ruckig-smoothed one (with smoothing: any jump of the raw reference is absorbed
         and smoothed away, so a start near either is no jump) and the TCP itself (a chunk that starts where the arm
         is, as a source planning from the observed state does while a fast arm lags its reference, asks for no jump
         of the arm)."""
         start = self.start_position(chunk, t_s, target_at_obs_m)
         gap = float(np.linalg.norm(start - self.reference(t_s)[0]))
-        if self.hybrid and self.config.use_ruckig and self._smoothed_pos is not None:
+        if self.smoothing and self._smoothed_pos is not None:
             gap = min(gap, float(np.linalg.norm(start - self._smoothed_pos)))
         if self.terms is not None:
             gap = min(gap, float(np.linalg.norm(start - self.terms.pos_m)))
@@ -165,30 +177,11 @@ class HybridController:
         return self.filter.estimate_at_observation(t0_s, best)
 
     def start_position(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> np.ndarray:
-        """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, retargeting
-        included (what the splice check compares with the reference being executed)."""
+        """The position (3,) m the reference would take at ``t_s`` if ``chunk`` became active now, the executor's
+        correction included (what the splice check compares with the reference being executed)."""
         target_at_obs_m = self._target_at_observation(chunk.t0_s, target_at_obs_m)
         ref = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
-        pos = ref.sample(t_s)[0][:3]
-        if self.hybrid and self.filter.initialized and trusted(self.config.retarget, ref.aim_pos_m, target_at_obs_m):
-            offset, _ = retarget_offset(self.config.retarget, t_s, ref.aim_pos_m, target_at_obs_m,
-                                        self.filter.predict_pos(t_s), self.filter.predict_vel(t_s), t_s,
-                                        min(ref.t_last_s, t_s + 1.0 / self.config.replan_hz))
-            pos = pos + offset
-        return pos
-
-    def _ensemble_sample(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """ACT temporal ensembling: weighted mean of every chunk covering ``t_s``, oldest weighing most."""
-        live = [c for c in self.ensemble if c.t_last_s >= t_s] or [self.ensemble[-1]]
-        oldest = live[0].chunk.t0_s
-        action, rate, total = np.zeros(7), np.zeros(7), 0.0
-        for c in live:
-            w = float(np.exp(-self.config.ensemble_decay_per_s * (c.chunk.t0_s - oldest)))
-            a, r = c.sample(t_s)
-            action += w * a
-            rate += w * r
-            total += w
-        return action / total, rate / total
+        return ref.sample(t_s)[0][:3] + self.executor.offset(t_s, ref)[0]
 
     # ---- the stale-chunk watchdog ----------------------------------------------------
     def covered(self, t_s: float) -> bool:
@@ -206,33 +199,21 @@ class HybridController:
         self.stop = StopTrajectory(t_s, np.concatenate([pos, rotvec, [gripper]]),
                                    np.concatenate([vel, rotvec_rate, [0.0]]), sc.a_max_m_s2, sc.j_max_m_s3,
                                    sc.dw_max_rad_s2, sc.ddw_max_rad_s3)
-        self._trusted = False
         self.watchdog_stops += 1
         return True
 
     # ---- the 1 kHz tick ------------------------------------------------------------
     def reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing."""
+        """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing: the watchdog's stop, the hold
+        before the first chunk, or the executor's sample of the executed chunk(s) plus its correction."""
         if self.stop is not None:
             action, rate = self.stop.sample(t_s)
             return action[:3], rate[:3], action[3:6], rate[3:6], float(action[6])
         if self.active is None:
             return self._hold_pos, np.zeros(3), self._hold_rotvec, np.zeros(3), GRIPPER_OPEN_M
-        action, rate = self._ensemble_sample(t_s) if self._ensemble_mode else self.active.sample(t_s)
-        pos, vel = action[:3], rate[:3]
-        if self._trusted and self.filter.initialized:
-            offset, offset_vel = retarget_offset(
-                self.config.retarget,
-                t_s,
-                self.active.aim_pos_m,
-                self.active.target_at_obs_m,
-                self.filter.predict_pos(t_s),
-                self.filter.predict_vel(t_s),
-                self.active.t_active_s,
-                self._blend_end_s,
-            )
-            pos, vel = pos + offset, vel + offset_vel
-        return pos, vel, action[3:6], rate[3:6], float(action[6])
+        action, rate = self.executor.sample(t_s, self.active)
+        offset, offset_vel = self.executor.offset(t_s, self.active)
+        return action[:3] + offset, rate[:3] + offset_vel, action[3:6], rate[3:6], float(action[6])
 
     def reference_positions(self, times_s: np.ndarray) -> np.ndarray:
         """Positions (N, 3) of :meth:`reference` at many times at once (the MPC's preview), vectorized."""
@@ -241,13 +222,9 @@ class HybridController:
             return self.stop.sample_positions(times_s)
         if self.active is None:
             return np.tile(self._hold_pos, (len(times_s), 1))
-        if self._ensemble_mode:
-            return np.array([self.reference(t)[0] for t in times_s]).reshape(-1, 3)
-        pos = self.active.sample_positions(times_s)
-        if self._trusted and self.filter.initialized:
-            pos = pos + retarget_offsets(self.config.retarget, times_s, self.active.aim_pos_m, self.active.target_at_obs_m,
-                                         self.filter.predict_pos_many(times_s), self.active.t_active_s, self._blend_end_s)
-        return pos
+        pos = self.executor.sample_positions(times_s, self.active)
+        offsets = self.executor.offsets_many(times_s, self.active)
+        return pos if offsets is None else pos + offsets
 
     def _plan_start(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms):
         """Where a new MPC plan starts. ``config.mpc_plan_start == "measured"`` (default): the measured state (the
@@ -275,7 +252,7 @@ class HybridController:
         Ruckig offset still to be smoothed away) and plan within the joint limits, from :meth:`_plan_start`."""
         taus = self._mpc_taus
         preview = self.reference_positions(t_s + taus)
-        if self.config.use_ruckig and self.config.smoother.relative:
+        if self.smoothing and self.config.smoother.relative:
             preview = preview + self.smoother.preview_pos_offset(taus)
         q0, dq0, pos0, rot0, jac0 = self._plan_start(t_s, q_rad, dq_rad_s, terms)
         return self.mpc.solve(t_s, q0, dq0, pos0, jac0, preview, orientation_error(rot_des, rot0))
@@ -283,7 +260,7 @@ class HybridController:
     def _smoothed_reference(self, t_s: float):
         """(pos, vel, acc, rot, ang_vel, ang_acc, gripper): the reference after retargeting and Ruckig."""
         pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
-        if self.hybrid and self.config.use_ruckig:
+        if self.smoothing:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
             self._smoothed_pos = pos
         else:

@@ -17,9 +17,12 @@ from controllers.safety import NONFINITE, CommandLimits, SafetyMonitor
 from mmact_ctrl.chunk import ChunkSource, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
+from mmact_ctrl.executors import QueryContext
 from mmact_ctrl.perception import OracleSensor, TargetSensor
-from mmact_ctrl.reference import ChunkReference
 from mmact_ctrl.world import World
+
+#: the earlier frame a chunk source is shown beside the current one (``Observation.target_prev_pos_m``), s
+FRAME_GAP_S = 0.1
 
 
 @dataclass
@@ -31,7 +34,10 @@ class EpisodeLog:
     bitmask, ``torque_rate_max_nm_s`` the largest torque rate sent. Faults survived: ``rejections`` chunks
     rejected per reason (``mmact_ctrl.chunk_intake``), ``watchdog_stops``, ``gated_measurements`` (per gate),
     ``missed_ticks``; ``abort`` is ``{"t_s", "reason"}`` when the robot would have aborted the motion.
-    ``events`` lists ``(t_s, what, detail)`` of every fault handled.
+    ``events`` lists ``(t_s, what, detail)`` of every fault handled. ``change_times_s``: when the target's motion
+    changed course (``World.target_change_times_s``); ``delay_steps``: per activated chunk, the waypoints of the
+    running chunk consumed while it was computed (activation time minus observation time, in chunk steps: the
+    inference delay d of RTC, as it actually ran).
     """
 
     seed: int
@@ -47,6 +53,8 @@ class EpisodeLog:
     chunk_active_s: list[float] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     jump_times_s: tuple[float, ...] = ()
+    change_times_s: tuple[float, ...] = ()
+    delay_steps: list[float] = field(default_factory=list)
     objects_pos_m: np.ndarray | None = None  # (n, n_objects, 3) when the world has several objects
     target_index: int = 0
     qp_failures: int = 0
@@ -90,8 +98,10 @@ class CommandLink(Protocol):
         ...
 
 
-def observe(world: World, controller: HybridController, t_s: float, with_image: bool) -> Observation:
-    """What a chunk source sees at ``t_s``: robot state, one frame's worth of target, pixels if needed."""
+def observe(world: World, controller: HybridController, t_s: float, with_image: bool,
+            target_prev_pos_m: np.ndarray | None = None, frame_gap_s: float = 0.0) -> Observation:
+    """What a chunk source sees at ``t_s``: robot state, the target in this frame (and, when given, in the frame
+    ``frame_gap_s`` earlier), pixels if needed."""
     state = world.state()
     ee_pos, ee_rotvec = controller.ee_pose(state.q_rad)
     return Observation(
@@ -104,26 +114,9 @@ def observe(world: World, controller: HybridController, t_s: float, with_image: 
         target_pos_m=world.target_pos_m().copy(),
         image=world.render() if with_image else None,
         instruction=world.instruction,
+        target_prev_pos_m=None if target_prev_pos_m is None else np.asarray(target_prev_pos_m, dtype=float).copy(),
+        frame_gap_s=float(frame_gap_s),
     )
-
-
-def receding_k(cfg, chunk: ActionChunk) -> int:
-    """Waypoints a receding-horizon executor runs per chunk."""
-    if cfg.receding_k:
-        return min(cfg.receding_k, chunk.horizon)
-    return int(min(chunk.horizon, max(1, round(1.0 / (cfg.replan_hz * chunk.dt_s)))))
-
-
-def known_prefix(controller: HybridController, pending, t_s: float, latency_s: float, source) -> np.ndarray:
-    """Inpainting: the waypoints (n, 7) that will run while the next chunk is computed, taken from the
-    chunk that will be executing then (the last one scheduled), at the new chunk's waypoint times."""
-    scheduled = pending[-1].chunk if pending else (controller.active.chunk if controller.active else None)
-    if scheduled is None:
-        return np.zeros((0, 7))
-    dt = getattr(source, "chunk_dt_s", scheduled.dt_s)
-    n_known = int(np.ceil(latency_s / dt - 1e-9))
-    ref = ChunkReference(chunk=scheduled, t_active_s=t_s, target_at_obs_m=None)
-    return np.array([ref.sample(t_s + (i + 1) * dt)[0] for i in range(n_known)]).reshape(n_known, 7)
 
 
 def run_episode(
@@ -138,6 +131,9 @@ def run_episode(
     sensor: TargetSensor | None = None,
 ) -> EpisodeLog:
     """Run one episode of ``controller.config.duration_s`` and return its log.
+
+    The loop knows no mode names: when and what to ask the source, and how chunks are executed, is the
+    controller's executor (``mmact_ctrl.executors``).
 
     Nothing a fault does escapes this loop: a chunk source that raises or answers garbage is rejected and
     counted (:class:`~mmact_ctrl.chunk_intake.ChunkIntake`), silence is met by the watchdog's stop, a bad
@@ -187,7 +183,8 @@ def run_episode(
         log.target_index = int(getattr(world, "target_index", 0))
     next_plan_s = 0.0
     last_arrival_s = 0.0  # the watchdog's clock: the last valid chunk (or the start)
-    mode = cfg.mode
+    executor = controller.executor
+    gap_ticks = int(round(FRAME_GAP_S / dt))
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
     render_video = getattr(world, "render_video", None)  # optional part of a world: a larger frame for videos
     if sensor is None:
@@ -215,12 +212,13 @@ def run_episode(
             log.measurements_lost += m.pos_m is None
         perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
         if t >= next_plan_s - eps:
-            obs = observe(world, controller, t, with_image=source.needs_image)
-            if mode == "inpaint":
-                prefix = known_prefix(controller, intake.pending, t, latency_s, source)
-                call = lambda: source.plan_inpaint(obs, prefix)  # noqa: E731
-            else:
-                call = lambda: source.plan(obs)  # noqa: E731
+            if k >= gap_ticks:  # the frame FRAME_GAP_S earlier (the target positions recorded so far)
+                prev, gap_s = log.target_pos_m[k - gap_ticks], gap_ticks * dt
+            else:  # no earlier frame yet: the first one
+                prev, gap_s = (log.target_pos_m[0], k * dt) if k > 0 else (None, 0.0)
+            obs = observe(world, controller, t, with_image=source.needs_image, target_prev_pos_m=prev, frame_gap_s=gap_s)
+            scheduled = intake.pending[-1].chunk if intake.pending else (controller.active.chunk if controller.active else None)
+            call = executor.request(source, obs, QueryContext(t_s=t, latency_s=latency_s, scheduled=scheduled))
             p0 = time.perf_counter()
             chunk = intake.request(call, obs)
             log.plan_ms.append((time.perf_counter() - p0) * 1e3)
@@ -229,21 +227,18 @@ def run_episode(
                 delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
                 delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
                 intake.submit(t + delay_s, chunk, controller.target_estimate(t))
-            if mode == "receding" and chunk is not None:  # the next query is set when this chunk starts running
-                next_plan_s = float("inf")
-            else:
-                next_plan_s = t + replan_period_s if mode == "receding" else next_plan_s + replan_period_s
+            next_plan_s = executor.after_request(t, chunk, next_plan_s, replan_period_s)
         tick0 = time.perf_counter()
         for entry in intake.due(t + eps):
             gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m)
             if intake.admit(entry, t, controller.active, gap_m=gap_m):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
                 log.chunk_active_s.append(t)
+                log.delay_steps.append((t - entry.chunk.t0_s) / entry.chunk.dt_s)
                 last_arrival_s = t
-                if mode == "receding":  # query again once k waypoints of this chunk have run
-                    next_plan_s = t + receding_k(cfg, entry.chunk) * entry.chunk.dt_s
-            elif mode == "receding" and next_plan_s == float("inf"):
-                next_plan_s = t  # the chunk it waited for was refused: ask again now
+                next_plan_s = executor.after_activation(t, controller.active, next_plan_s)
+            else:
+                next_plan_s = executor.after_refusal(t, next_plan_s)
         if controller.stop is None and (not controller.covered(t) or t - last_arrival_s > cfg.chunk_timeout_s):
             controller.watchdog(t)
             log.events.append((t, "watchdog_stop", ""))
@@ -296,4 +291,7 @@ def run_episode(
     log.gated_measurements = {"nonfinite": f.gated_nonfinite, "frozen": f.gated_frozen, "outlier": f.gated_outlier}
     log.sensor_stats = dict(getattr(sensor, "stats", {}))
     log.jump_times_s = tuple(t for t in world.target_jump_times_s() if t <= cfg.duration_s)
+    changes_fn = getattr(world, "target_change_times_s", None)  # a world without it: the jumps are the changes
+    changes = changes_fn() if changes_fn is not None else log.jump_times_s
+    log.change_times_s = tuple(t for t in changes if t <= cfg.duration_s)
     return log

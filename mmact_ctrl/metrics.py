@@ -22,6 +22,11 @@
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
+- reaction (``mmact_ctrl.reaction``): for each change of the target's motion (a jump, flip, swerve, set-off:
+  ``EpisodeLog.change_times_s``), ``reaction_s`` the median time until the TCP's velocity turns toward the new
+  course, ``reach_after_change_s`` the median time until the TCP is within the success radius again (NaN: none).
+- d_measured: the inference delay as it ran, median over chunks of the waypoints of the running chunk consumed
+  while the chunk was computed (RTC's d, in chunk steps; ``EpisodeLog.delay_steps``).
 - jump recovery: for each target teleport whose 1 s window ends inside the episode, whether the
   TCP got within the success radius of the new goal within ``jump_window_s`` (1 s), and how long it took.
 """
@@ -33,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mmact_ctrl.loop import EpisodeLog
+from mmact_ctrl.reaction import reaction_metrics
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,8 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         if hit.size:
             recovery_s.append(float(hit[0] * dt))
     sim_s = float(len(log.t_s) * dt)
+    reaction = reaction_metrics(log.t_s, log.ee_pos_m, log.target_pos_m, log.change_times_s,
+                                success_radius_m=config.success_radius_m)
     return {
         "seed": int(log.seed),
         "instruction": log.instruction,
@@ -155,6 +163,11 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "n_jumps": len(recovered),
         "jumps_recovered": int(sum(recovered)),
         "jump_recovery_s": recovery_s,
+        "reaction_s": float(reaction["reaction_s"]),
+        "reach_after_change_s": float(reaction["reach_after_change_s"]),
+        "n_changes": int(reaction["n_changes"]),
+        "changes_reacted": int(reaction["reacted"]),
+        "d_measured": float(np.median(log.delay_steps)) if log.delay_steps else float("nan"),
     }
 
 
@@ -200,4 +213,7 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "sensor_ms_per_sim_s": float(np.mean([e.get("sensor_ms_per_sim_s", 0.0) for e in episodes])),
         "jump_recovered_rate": float(sum(e["jumps_recovered"] for e in episodes) / n_jumps) if n_jumps else float("nan"),
         "jump_recovery_s": _nanmedian(recovery),
+        "reaction_s": _nanmedian([e.get("reaction_s", float("nan")) for e in episodes]),
+        "reach_after_change_s": _nanmedian([e.get("reach_after_change_s", float("nan")) for e in episodes]),
+        "d_measured": _nanmedian([e.get("d_measured", float("nan")) for e in episodes]),
     }

@@ -8,6 +8,25 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk
 
+#: the last waypoint steps agree to this fraction (and absolute m) when a chunk's tail runs at a constant velocity
+_TAIL_REL_TOL = 0.2
+_TAIL_ABS_TOL_M = 2e-4
+
+
+def terminal_velocity_m_s(chunk: ActionChunk) -> np.ndarray:
+    """The velocity (3,) m/s of the chunk's last waypoint step when its last two steps agree (a constant-velocity
+    tail: the chunk follows a moving target's predicted course), else zero (it decelerates to rest at its aim, or
+    turns, e.g. at a workspace wall). Chunks with fewer than three waypoints: zero."""
+    w = chunk.waypoints
+    if w.shape[0] < 3:
+        return np.zeros(3)
+    d1 = w[-1, :3] - w[-2, :3]
+    d0 = w[-2, :3] - w[-3, :3]
+    step = float(np.linalg.norm(d1))
+    if step < _TAIL_ABS_TOL_M or float(np.linalg.norm(d1 - d0)) > _TAIL_REL_TOL * step + _TAIL_ABS_TOL_M:
+        return np.zeros(3)
+    return d1 / chunk.dt_s
+
 
 @dataclass(frozen=True)
 class ChunkReference:
@@ -27,6 +46,17 @@ class ChunkReference:
     def aim_pos_m(self) -> np.ndarray:
         """Where the chunk aims: its last waypoint's position."""
         return self.chunk.waypoints[-1, :3]
+
+    @property
+    def aim_vel_m_s(self) -> np.ndarray:
+        """How the chunk's aim moves (3,) m/s: its terminal velocity when its last waypoints run at a constant
+        velocity (a source that leads a moving target ends its chunk on the target's predicted course), else zero
+        (a chunk that comes to rest at its aim). See :func:`terminal_velocity_m_s`."""
+        return terminal_velocity_m_s(self.chunk)
+
+    def aim_at(self, t_s: float) -> np.ndarray:
+        """Where the chunk assumed its target to be at ``t_s`` (3,) m: the aim moved along :attr:`aim_vel_m_s`."""
+        return self.aim_pos_m + self.aim_vel_m_s * (t_s - self.t_last_s)
 
     @property
     def t_last_s(self) -> float:

@@ -32,6 +32,9 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("real-time factor", "realtime_factor", "{:.1f}x"),
     ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),
     ("jumps recovered <1 s", "jump_recovered_rate", "{:.0%}"),
+    ("reaction to a change [s]", "reaction_s", "{:.2f}"),
+    ("reach after a change [s]", "reach_after_change_s", "{:.2f}"),
+    ("inference delay d [steps]", "d_measured", "{:.1f}"),
     ("measurements lost", "measurements_lost_rate", "{:.0%}"),
     ("sensor [ms per sim s]", "sensor_ms_per_sim_s", "{:.0f}"),
 )

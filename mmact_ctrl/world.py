@@ -62,3 +62,8 @@ class World(Protocol):
     def target_jump_times_s(self) -> tuple[float, ...]:
         """Times at which the target teleported this episode (empty unless the motion jumps)."""
         ...
+
+    def target_change_times_s(self) -> tuple[float, ...]:
+        """Times (s) at which the target's course changes abruptly this episode: teleports, velocity
+        flips, turns, set-offs from rest (``scenarios.targets``); wall bounces do not count."""
+        ...

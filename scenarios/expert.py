@@ -1,9 +1,21 @@
-"""The scripted expert: the honest stand-in for a single-frame chunk policy.
+"""The scripted expert: the honest stand-in for a chunk policy.
 
-It sees what one camera frame shows: where the target is at the observation time ``t0``,
-not where it is going. It plans a minimum-jerk approach from the current TCP pose to that
-point at the nominal grasp orientation with the gripper open, and its chunk goes through
-the same action tokenizer as the learned policy's (so quantization is real).
+It plans a minimum-jerk approach from the current TCP pose at the nominal grasp orientation with
+the gripper open, and its chunk goes through the same action tokenizer as the learned policy's (so
+quantization is real). What it aims at is ``ExpertConfig.lead``:
+
+- ``"none"``: what one camera frame shows: where the target is at the observation time ``t0``, not
+  where it is going (a single-frame policy);
+- ``"velocity"``: it sees two frames (``t0 - frame_gap`` and ``t0``, ``Observation.target_prev_pos_m``),
+  estimates the target's velocity from them, and aims each waypoint at where the target will be at that
+  waypoint's time (waypoint ``i`` runs at ``t0 + (i + 1) dt``: the inference latency, during which the
+  first waypoints are already past when the chunk arrives, is included by construction). A two-frame
+  velocity above ``max_lead_speed_m_s`` is not a motion but a discontinuity (a jump between the frames):
+  it then aims where the target is now, as a real two-frame estimator with a plausibility gate would.
+  With ``workspace_low_m`` / ``workspace_high_m`` set (the box the targets move in: the region of the table the
+  scene shows), the constant-velocity prediction is reflected at its walls, as the targets' motions are: a lead
+  that extrapolates through a wall sends the arm out of the workspace. Every execution mode is given the same
+  chunks, so this knowledge is shared by all of them.
 """
 
 from __future__ import annotations
@@ -16,6 +28,8 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
 
 GRIPPER_OPEN_M = 0.08
+#: what the expert aims at (``ExpertConfig.lead``)
+LEADS: tuple[str, ...] = ("none", "velocity")
 
 
 @dataclass(frozen=True)
@@ -25,14 +39,32 @@ class ExpertConfig:
     dt_s: waypoint spacing, s.
     approach_speed_m_s: average TCP speed of the approach, m/s.
     min_approach_s: shortest approach duration, s.
+
+    lead: ``"none"`` (aim where the target is at t0) or ``"velocity"`` (aim where it will be; see the module).
+    max_lead_speed_m_s: lead ``"velocity"``: a two-frame speed above this is taken for a jump, m/s.
+    workspace_low_m, workspace_high_m: lead ``"velocity"``: the box the target stays in (its prediction is
+        reflected at the walls), m; None: unbounded.
     """
 
     horizon: int = 16
     dt_s: float = 0.1
     approach_speed_m_s: float = 0.4
     min_approach_s: float = 0.5
+    lead: str = "none"
+    max_lead_speed_m_s: float = 0.8
+    workspace_low_m: tuple[float, float, float] | None = None
+    workspace_high_m: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.lead not in LEADS:
+            raise ValueError(f"ExpertConfig.lead must be one of {LEADS}, got {self.lead!r}")
+        if not self.max_lead_speed_m_s > 0:
+            raise ValueError(f"ExpertConfig.max_lead_speed_m_s must be > 0, got {self.max_lead_speed_m_s}")
+        if (self.workspace_low_m is None) != (self.workspace_high_m is None):
+            raise ValueError("ExpertConfig.workspace_low_m and workspace_high_m must be given together")
+        if self.workspace_low_m is not None and not np.all(np.asarray(self.workspace_high_m) > np.asarray(self.workspace_low_m)):
+            raise ValueError(f"ExpertConfig.workspace_high_m {self.workspace_high_m} must exceed workspace_low_m "
+                             f"{self.workspace_low_m} on every axis")
         if self.horizon < 1:
             raise ValueError(f"ExpertConfig.horizon must be >= 1, got {self.horizon}")
         for name in ("dt_s", "approach_speed_m_s", "min_approach_s"):
@@ -46,21 +78,53 @@ def min_jerk(s: np.ndarray) -> np.ndarray:
     return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
 
 
-def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.ndarray) -> np.ndarray:
-    """Float chunk ``(H, 7)``: min-jerk from ``ee_pos_m`` to ``target_pos_m``, nominal orientation, open gripper."""
+def lead_velocity_m_s(config: ExpertConfig, observation: Observation) -> np.ndarray:
+    """The target velocity (3,) m/s the expert leads with: zero for ``lead="none"``, without an earlier frame, or
+    when the two frames imply a speed above ``max_lead_speed_m_s`` (a jump)."""
+    prev, gap = observation.target_prev_pos_m, float(observation.frame_gap_s)
+    if config.lead == "none" or prev is None or not gap > 0:
+        return np.zeros(3)
+    vel = (np.asarray(observation.target_pos_m, dtype=np.float64) - np.asarray(prev, dtype=np.float64)) / gap
+    if not np.all(np.isfinite(vel)) or float(np.linalg.norm(vel)) > config.max_lead_speed_m_s:
+        return np.zeros(3)
+    return vel
+
+
+def _reflect(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Reflect points into the box [low, high] (triangle wave per axis); points inside are unchanged."""
+    width = high - low
+    u = np.mod(x - low, 2.0 * width)
+    return low + np.where(u > width, 2.0 * width - u, u)
+
+
+def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.ndarray,
+                   target_vel_m_s: np.ndarray | None = None) -> np.ndarray:
+    """Float chunk ``(H, 7)``: min-jerk from ``ee_pos_m`` toward ``target_pos_m``, nominal orientation, open
+    gripper. With ``target_vel_m_s``, waypoint ``i`` aims at the target's constant-velocity position at its own
+    time ``(i + 1) dt`` after the observation (the approach duration is set by the distance to the target at the
+    end of the approach)."""
     start = np.asarray(ee_pos_m, dtype=np.float64)
     goal = np.asarray(target_pos_m, dtype=np.float64)
-    duration = max(config.min_approach_s, float(np.linalg.norm(goal - start)) / config.approach_speed_m_s)
     times = config.dt_s * np.arange(1, config.horizon + 1)
+    vel = np.zeros(3) if target_vel_m_s is None else np.asarray(target_vel_m_s, dtype=np.float64)
+    duration = max(config.min_approach_s, float(np.linalg.norm(goal - start)) / config.approach_speed_m_s)
+    if np.any(vel):  # where it will be once reached (two fixed-point steps of duration <-> distance)
+        for _ in range(2):
+            duration = max(config.min_approach_s,
+                           float(np.linalg.norm(goal + vel * duration - start)) / config.approach_speed_m_s)
+    goals = goal + times[:, None] * vel
+    if np.any(vel) and config.workspace_low_m is not None:  # the target reflects at the walls: so does the lead
+        goals = _reflect(goals, np.asarray(config.workspace_low_m, dtype=float), np.asarray(config.workspace_high_m, dtype=float))
     s = min_jerk(times / duration)[:, None]
     actions = np.zeros((config.horizon, 7))
-    actions[:, :3] = start + s * (goal - start)
+    actions[:, :3] = start + s * (goals - start)
     actions[:, 6] = GRIPPER_OPEN_M
     return actions
 
 
 class ScriptedExpert:
-    """``ChunkSource`` that aims at the target it sees in one frame."""
+    """``ChunkSource`` that aims at the target it sees in one frame, or (``lead="velocity"``) where two frames say
+    it will be."""
 
     needs_image = False
 
@@ -79,7 +143,8 @@ class ScriptedExpert:
         return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
 
     def plan(self, observation: Observation) -> ActionChunk:
-        actions = expert_actions(self.config, observation.ee_pos_m, observation.target_pos_m)
+        actions = expert_actions(self.config, observation.ee_pos_m, observation.target_pos_m,
+                                 lead_velocity_m_s(self.config, observation))
         return self._finish(actions, observation)
 
     def plan_inpaint(self, observation: Observation, known: np.ndarray) -> ActionChunk:
@@ -89,7 +154,10 @@ class ScriptedExpert:
         n = min(len(known), self.config.horizon)
         if n == 0:
             return self.plan(observation)
-        rest = expert_actions(self.config, known[n - 1, :3], observation.target_pos_m)[: self.config.horizon - n]
+        vel = lead_velocity_m_s(self.config, observation)
+        # the rest starts at the last frozen waypoint's time: aim at the target then (+ n dt) and on
+        rest = expert_actions(self.config, known[n - 1, :3], observation.target_pos_m + n * self.config.dt_s * vel,
+                              vel)[: self.config.horizon - n]
         return self._finish(np.vstack([known[:n], rest]), observation)
 
     def _finish(self, actions: np.ndarray, observation: Observation) -> ActionChunk:

@@ -27,7 +27,13 @@ def make_world(target: str = "linear", speed_m_s: float = 0.2, noise_m: float = 
                     instruction=instruction)
 
 
-def make_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1) -> ScriptedExpert:
-    """The scripted expert, its chunks quantized through the shared action tokenizer (bins=0: not quantized)."""
+def make_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, lead: str = "none",
+                world: SimWorld | None = None) -> ScriptedExpert:
+    """The scripted expert, its chunks quantized through the shared action tokenizer (bins=0: not quantized);
+    ``lead``: ``"none"`` aims where the target is, ``"velocity"`` where two frames say it will be (reflected at the
+    walls of ``world``'s target workspace when a world is given)."""
     tokenizer = ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
-    return ScriptedExpert(ExpertConfig(horizon=horizon, dt_s=dt_s), tokenizer)
+    box = {}
+    if world is not None:
+        box = dict(workspace_low_m=tuple(world.target.workspace_low_m), workspace_high_m=tuple(world.target.workspace_high_m))
+    return ScriptedExpert(ExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead, **box), tokenizer)

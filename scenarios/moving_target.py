@@ -26,6 +26,7 @@ from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
 from scenarios.targets import KINDS as TARGET_KINDS
+from scenarios.expert import LEADS
 from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
 
 PROG = "python -m scenarios.moving_target"
@@ -90,6 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--source", choices=("policy", "expert"), default=DEFAULT_SOURCE,
                      help="policy: the shipped unified-token policy looks at the camera and reads the instruction; "
                           "expert: the scripted expert sees the target where one frame shows it")
+    src.add_argument("--expert-lead", choices=LEADS, default="velocity",
+                     help="expert: velocity = it sees two frames (t0 - 0.1 s and t0), estimates the target's velocity and "
+                          "aims each waypoint where the target will be at that waypoint's time (latency included); "
+                          "none = it aims where the target is in the frame at t0 (a single-frame policy)")
     src.add_argument("--checkpoint", metavar="PATH", default=None,
                      help="policy checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
     src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=1,
@@ -104,12 +109,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "receding: run the first k waypoints of each chunk, then replan (Diffusion Policy); "
                         "temporal_ensemble: average overlapping chunks with exponential weights (ACT); "
                         "inpaint: real-time chunking, the waypoints that run during inference are frozen and the rest "
-                        "filled in; hybrid: ours, Kalman-filtered retargeting + Ruckig + QP. "
+                        "filled in; residual: an A2C2-style learned correction from the latest target measurements and "
+                        "the TCP state, tracked by the QP (--residual-checkpoint); hybrid: ours, Kalman-filtered "
+                        "retargeting + Ruckig + MPC + QP. "
                         "Several modes run side by side on the same seeds.")
     g.add_argument("--receding-k", type=_number(int, "--receding-k", 0), default=0,
                    help="receding: waypoints run per chunk before replanning (0: 1 / (replan-hz * chunk-dt-s))")
     g.add_argument("--ensemble-decay", type=_number(float, "--ensemble-decay", 0), default=1.0,
                    help="temporal_ensemble: weight exp(-decay * age difference in s), oldest chunk weighs most")
+    g.add_argument("--residual-checkpoint", metavar="PATH", default=None,
+                   help="residual: the learned residual's checkpoint (default: the shipped policy/checkpoints/residual.pt, "
+                        "trained by python -m scenarios.train_residual)")
     g.add_argument("--no-ruckig", action="store_true", help="hybrid: track the retargeted reference without Ruckig smoothing")
     g.add_argument("--no-mpc", action="store_true",
                    help="hybrid: no MPC between Ruckig and the QP (the QP tracks the smoothed reference directly)")
@@ -189,6 +199,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         ensemble_decay_per_s=args.ensemble_decay,
         chunk_timeout_s=args.chunk_timeout_s,
         splice_radius_m=args.splice_radius_m,
+        residual_checkpoint=args.residual_checkpoint or "",
         perception_hz=perception_hz(args),
         # a noise-free oracle repeats itself legitimately: the frozen gate is for real (noisy) sensors
         filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
@@ -219,12 +230,12 @@ def make_sensor(args: argparse.Namespace, world, dt_s: float):
     return OracleSensor(world, perception_hz(args), perception_latency_ms(args), dt_s)
 
 
-def make_source(args: argparse.Namespace):
+def make_source(args: argparse.Namespace, world=None):
     if args.source == "policy":
         from mmact_ctrl.policy_source import PolicyChunkSource
 
         return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps, refine_bins=args.refine_bins)
-    return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s)
+    return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s, lead=args.expert_lead, world=world)
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -233,9 +244,9 @@ def run(args: argparse.Namespace) -> dict:
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
     plane_z_m = (POLICY_PLANE_Z_M if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
-    source = make_source(args)
     world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
                        plane_z_m=plane_z_m, instruction=args.instruction)
+    source = make_source(args, world)
     try:
         sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
     except ValueError:

@@ -264,6 +264,11 @@ class SimWorld:
         self._require_reset()
         return tuple(self._motions[self.target_index].jump_times_s)
 
+    def target_change_times_s(self) -> tuple[float, ...]:
+        """Times (s) at which the instructed object's course changes abruptly this episode (jumps, flips, turns)."""
+        self._require_reset()
+        return tuple(self._motions[self.target_index].change_times_s)
+
     # ---------------------------------------------------------------- extras
 
     def home_tcp_pos_m(self) -> np.ndarray:

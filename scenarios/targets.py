@@ -12,6 +12,27 @@ Kinds (``TargetSpec.kind``):
   interpolated (so the speed is exact on every grid segment).
 - ``jump``: a static point that teleports by ``jump_dist_m`` in a random direction (kept inside the
   box; horizontal in a flat workspace, the policy's plane), first at a random time in [1.0, 2.0] s, then every ``jump_period_s`` up to ``horizon_s``.
+- ``reversal``: constant speed ``speed_m_s`` along a random direction (reflecting at the walls) whose
+  velocity flips (v -> -v) at random times: the first uniform in [1.0, 2.0] s, then gaps uniform in
+  [``reversal_min_gap_s``, ``reversal_max_gap_s``].
+- ``swerve``: constant speed, straight segments (reflecting at the walls); at random times (first in
+  [1.0, 2.0] s, gaps uniform in [``swerve_min_gap_s``, ``swerve_max_gap_s``]) the direction turns by
+  an angle uniform in [45, 135] deg: about the vertical with a random sign in a flat workspace, about
+  a random axis perpendicular to the velocity in 3-D.
+- ``accelerating``: a random direction (reflecting at the walls), speed
+  ``speed_m_s * (1 - cos(2 pi t / accel_period_s + phase)) / 2`` with a random phase: the target
+  comes to rest and sets off again once per ``accel_period_s``.
+
+``reversal``, ``swerve`` and ``accelerating`` use the ``random_walk`` grid (10 ms, up to
+``horizon_s``; a flip or turn inside a grid step is applied at its exact time, so only that one
+10 ms segment is a chord); linear motions (everything but ``circle`` and ``jump``) are horizontal in a
+flat workspace (z extent < ``PLANAR_EXTENT_M``).
+
+Every motion has ``change_times_s``, the times its course changes abruptly, for reaction metrics
+(``mmact_ctrl.reaction``): the teleports of ``jump``, the flips of ``reversal``, the turns of
+``swerve``, the moments ``accelerating`` sets off from rest; ``()`` for ``static``, ``linear``,
+``circle`` and ``random_walk`` (their wall bounces are not changes: the walls are part of a course a
+tracker can foresee, and the random walk turns smoothly). ``jump_times_s`` stays jumps only.
 
 Start points are drawn at least ``min_start_dist_m`` away from ``avoid_pos_m`` (by default the home
 TCP position of the Panda scene), so an episode is not solved at t = 0.
@@ -26,13 +47,15 @@ from typing import Protocol
 
 import numpy as np
 
-KINDS: tuple[str, ...] = ("static", "linear", "circle", "random_walk", "jump")
+KINDS: tuple[str, ...] = ("static", "linear", "circle", "random_walk", "jump", "reversal", "accelerating", "swerve")
 
 #: world position (m) of the Panda's ``tcp`` site at ``HOME_Q_RAD`` with the gripper open, as
 #: computed by ``scenarios.panda_scene.home_tcp_pos_m()`` (a test holds the two equal to 1 mm).
 HOME_TCP_POS_M: tuple[float, float, float] = (0.30689, 0.0, 0.48688)
 
-_GRID_DT_S = 0.01  # random-walk precomputation grid, s
+_GRID_DT_S = 0.01  # random-walk (and reversal, swerve, accelerating) precomputation grid, s
+_FIRST_CHANGE_S = (1.0, 2.0)  # the first jump, flip or turn happens uniformly in this interval, s
+_SWERVE_ANGLE_DEG = (45.0, 135.0)  # swerve turn angles, deg
 _MAX_TRIES = 10_000
 
 
@@ -42,15 +65,19 @@ class TargetSpec:
 
     Attributes:
         kind: one of ``KINDS``.
-        speed_m_s: target speed (linear, circle, random_walk), m/s.
+        speed_m_s: target speed (linear, circle, random_walk, reversal, swerve; the peak speed of
+            accelerating), m/s.
         workspace_low_m, workspace_high_m: corners of the box the target stays in, world frame, m.
         circle_radius_m: radius of the ``circle`` motion, m.
         jump_dist_m: distance of each teleport of the ``jump`` motion, m.
         jump_period_s: time between teleports after the first, s.
-        horizon_s: length of precomputed motions (random_walk, jump times), s; after it the
-            random walk holds its last position and no more jumps happen.
+        horizon_s: length of precomputed motions (random_walk, reversal, swerve, accelerating, jump
+            times), s; after it the grid motions hold their last position and no more jumps happen.
         random_walk_turn_std_rad_s: stationary std of the random walk's turn rate (per axis), rad/s.
         random_walk_turn_tau_s: correlation time of the random walk's turn rate, s.
+        reversal_min_gap_s, reversal_max_gap_s: range of the uniform time between two flips, s.
+        swerve_min_gap_s, swerve_max_gap_s: range of the uniform time between two turns, s.
+        accel_period_s: period of the ``accelerating`` speed profile (rest to rest), s.
         min_start_dist_m: minimum distance of the start point from ``avoid_pos_m``, m.
         avoid_pos_m: point the start must stay away from (default: the home TCP), m.
     """
@@ -65,6 +92,11 @@ class TargetSpec:
     horizon_s: float = 60.0
     random_walk_turn_std_rad_s: float = 1.5
     random_walk_turn_tau_s: float = 0.5
+    reversal_min_gap_s: float = 0.8
+    reversal_max_gap_s: float = 1.6
+    swerve_min_gap_s: float = 0.8
+    swerve_max_gap_s: float = 1.6
+    accel_period_s: float = 2.0
     min_start_dist_m: float = 0.1
     avoid_pos_m: tuple[float, float, float] = HOME_TCP_POS_M
 
@@ -75,10 +107,16 @@ class TargetSpec:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"TargetSpec.{name} must be finite and >= 0, got {value!r}")
-        for name in ("circle_radius_m", "jump_dist_m", "jump_period_s", "horizon_s", "random_walk_turn_tau_s"):
+        for name in ("circle_radius_m", "jump_dist_m", "jump_period_s", "horizon_s", "random_walk_turn_tau_s",
+                     "reversal_min_gap_s", "reversal_max_gap_s", "swerve_min_gap_s", "swerve_max_gap_s",
+                     "accel_period_s"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"TargetSpec.{name} must be finite and > 0, got {value!r}")
+        for family in ("reversal", "swerve"):
+            lo_gap, hi_gap = getattr(self, f"{family}_min_gap_s"), getattr(self, f"{family}_max_gap_s")
+            if lo_gap > hi_gap:
+                raise ValueError(f"TargetSpec.{family}_min_gap_s={lo_gap!r} exceeds {family}_max_gap_s={hi_gap!r}")
         if not (np.isfinite(self.random_walk_turn_std_rad_s) and self.random_walk_turn_std_rad_s >= 0):
             raise ValueError(f"TargetSpec.random_walk_turn_std_rad_s must be >= 0, got {self.random_walk_turn_std_rad_s!r}")
         for name in ("workspace_low_m", "workspace_high_m", "avoid_pos_m"):
@@ -114,6 +152,9 @@ class TargetMotion(Protocol):
 
     #: times at which the target teleports, s (empty unless ``kind == "jump"``).
     jump_times_s: tuple[float, ...]
+    #: times at which the course changes abruptly, s: jumps, flips, turns, set-offs from rest (see the
+    #: module docstring); wall bounces are not changes.
+    change_times_s: tuple[float, ...]
 
     def pos_m(self, t_s: float) -> np.ndarray:
         """Target position (3,) at time ``t_s`` (s >= 0), world frame, m."""
@@ -155,6 +196,15 @@ def _fold(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     return low + np.where(u > width, 2.0 * width - u, u)
 
 
+def _course_direction(rng: np.random.Generator, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Random unit direction (3,); horizontal in a flat workspace (objects at one height)."""
+    direction = _random_unit(rng)
+    if high[2] - low[2] < PLANAR_EXTENT_M:
+        direction[2] = 0.0
+        direction /= max(np.linalg.norm(direction), 1e-12)
+    return direction
+
+
 def _check_t(t_s: float) -> float:
     t = float(t_s)
     if not math.isfinite(t) or t < 0:
@@ -183,6 +233,7 @@ class StaticMotion:
 
     point_m: np.ndarray
     jump_times_s: tuple[float, ...] = ()
+    change_times_s: tuple[float, ...] = ()
 
     def pos_m(self, t_s: float) -> np.ndarray:
         _check_t(t_s)
@@ -198,6 +249,7 @@ class LinearMotion:
     low_m: np.ndarray
     high_m: np.ndarray
     jump_times_s: tuple[float, ...] = ()
+    change_times_s: tuple[float, ...] = ()
 
     def pos_m(self, t_s: float) -> np.ndarray:
         # _fold(start + v t, low, high) on Python floats: the world moves the object every 1 ms step,
@@ -224,6 +276,7 @@ class CircleMotion:
     rate_rad_s: float
     phase_rad: float
     jump_times_s: tuple[float, ...] = ()
+    change_times_s: tuple[float, ...] = ()
 
     def pos_m(self, t_s: float) -> np.ndarray:
         t = _check_t(t_s)
@@ -238,6 +291,7 @@ class GridMotion:
     points_m: np.ndarray  # (N, 3)
     grid_dt_s: float
     jump_times_s: tuple[float, ...] = ()
+    change_times_s: tuple[float, ...] = ()
 
     def pos_m(self, t_s: float) -> np.ndarray:
         t = _check_t(t_s)
@@ -255,6 +309,11 @@ class JumpMotion:
 
     points_m: np.ndarray  # (n_jumps + 1, 3)
     jump_times_s: tuple[float, ...]
+
+    @property
+    def change_times_s(self) -> tuple[float, ...]:
+        """The jumps are the changes."""
+        return self.jump_times_s
 
     def pos_m(self, t_s: float) -> np.ndarray:
         t = _check_t(t_s)
@@ -321,6 +380,119 @@ def _jump(spec: TargetSpec, rng: np.random.Generator, low: np.ndarray, high: np.
     return JumpMotion(points_m=np.asarray(points), jump_times_s=times)
 
 
+# ---- reversal, swerve, accelerating: straight courses on the 10 ms grid (plain-float loops)
+
+
+def _change_times(rng: np.random.Generator, min_gap_s: float, max_gap_s: float, horizon_s: float) -> tuple[float, ...]:
+    """First change uniform in ``_FIRST_CHANGE_S``, then gaps uniform in [min_gap_s, max_gap_s], below horizon_s."""
+    times, t = [], rng.uniform(*_FIRST_CHANGE_S)
+    while t < horizon_s:
+        times.append(float(t))
+        t += rng.uniform(min_gap_s, max_gap_s)
+    return tuple(times)
+
+
+def _advance(p: list[float], d: list[float], dist_m: float, lo: list[float], hi: list[float]) -> None:
+    """Move ``p`` by ``dist_m`` along the unit ``d``, reflecting ``p`` and ``d`` at the walls (in place)."""
+    for a in range(3):
+        x = p[a] + dist_m * d[a]
+        while not lo[a] <= x <= hi[a]:
+            x = 2.0 * lo[a] - x if x < lo[a] else 2.0 * hi[a] - x
+            d[a] = -d[a]
+        p[a] = x
+
+
+def _turning_course(spec: TargetSpec, p0: np.ndarray, d0: np.ndarray, low: np.ndarray, high: np.ndarray,
+                    times_s: tuple[float, ...], turns: list) -> GridMotion:
+    """Constant speed from ``p0`` along ``d0``; at ``times_s[i]`` the direction becomes ``turns[i](d)``.
+
+    A change inside a grid step is applied at its exact time, so grid points lie on the true course.
+    """
+    dt = _GRID_DT_S
+    n = int(np.ceil(spec.horizon_s / dt)) + 1
+    p, d = p0.tolist(), d0.tolist()
+    lo, hi = low.tolist(), high.tolist()
+    speed, e, out = spec.speed_m_s, 0, [list(p)]
+    for k in range(1, n):
+        t, t_end = (k - 1) * dt, k * dt
+        while e < len(times_s) and times_s[e] < t_end:
+            _advance(p, d, speed * (times_s[e] - t), lo, hi)
+            d, t, e = turns[e](d), times_s[e], e + 1
+        _advance(p, d, speed * (t_end - t), lo, hi)
+        out.append(list(p))
+    return GridMotion(points_m=np.asarray(out), grid_dt_s=dt, change_times_s=times_s)
+
+
+def _reversal(spec: TargetSpec, rng: np.random.Generator, low: np.ndarray, high: np.ndarray) -> GridMotion:
+    p0, d0 = _start_point(spec, rng, low, high), _course_direction(rng, low, high)
+    times = _change_times(rng, spec.reversal_min_gap_s, spec.reversal_max_gap_s, spec.horizon_s)
+    return _turning_course(spec, p0, d0, low, high, times, [lambda d: [-x for x in d]] * len(times))
+
+
+def _swerve(spec: TargetSpec, rng: np.random.Generator, low: np.ndarray, high: np.ndarray) -> GridMotion:
+    p0, d0 = _start_point(spec, rng, low, high), _course_direction(rng, low, high)
+    times = _change_times(rng, spec.swerve_min_gap_s, spec.swerve_max_gap_s, spec.horizon_s)
+    flat = high[2] - low[2] < PLANAR_EXTENT_M
+    angles = np.radians(rng.uniform(*_SWERVE_ANGLE_DEG, size=len(times)))
+    angles *= np.where(rng.uniform(size=len(times)) < 0.5, -1.0, 1.0)
+    axes = rng.normal(size=(len(times), 3))  # 3-D: made perpendicular to the velocity at the turn
+
+    def turn(angle: float, r: list[float]):
+        c, s = math.cos(angle), math.sin(angle)
+
+        def apply(d: list[float]) -> list[float]:
+            if flat:  # about the vertical: the course stays horizontal
+                return [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
+            # axis a = r minus its component along d; d' = d cos + (a x d) sin (Rodrigues, a _|_ d)
+            rd = r[0] * d[0] + r[1] * d[1] + r[2] * d[2]
+            a = [r[i] - rd * d[i] for i in range(3)]
+            na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+            if na < 1e-9:  # pragma: no cover - r parallel to d: probability zero
+                a, na = [-d[1], d[0], 0.0], math.hypot(d[0], d[1]) or 1.0
+            a = [x / na for x in a]
+            axd = [a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2], a[0] * d[1] - a[1] * d[0]]
+            out = [c * d[i] + s * axd[i] for i in range(3)]
+            norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+            return [x / norm for x in out]
+
+        return apply
+
+    turns = [turn(float(angle), r.tolist()) for angle, r in zip(angles, axes)]
+    return _turning_course(spec, p0, d0, low, high, times, turns)
+
+
+def _accelerating(spec: TargetSpec, rng: np.random.Generator, low: np.ndarray, high: np.ndarray) -> GridMotion:
+    """Speed ``v (1 - cos(w t + phase)) / 2``, ``w = 2 pi / accel_period_s``, along a fixed course.
+
+    Changes: the set-offs from rest, ``w t + phase = 2 pi m`` (t > 0). Not the speed peaks: there the
+    speed has a smooth maximum, course and direction stay as they were and the tracker is already
+    moving along with the target, so there is nothing to turn toward; at a set-off the target leaves
+    rest, and a tracker that has (nearly) caught it must start moving again.
+    """
+    dt = _GRID_DT_S
+    n = int(np.ceil(spec.horizon_s / dt)) + 1
+    p0, d0 = _start_point(spec, rng, low, high), _course_direction(rng, low, high)
+    phase = float(rng.uniform(0.0, 2.0 * math.pi))
+    w = 2.0 * math.pi / spec.accel_period_s
+    half_v = 0.5 * spec.speed_m_s
+
+    def travelled_m(t: float) -> float:  # integral of the speed from 0 to t, up to a constant
+        return half_v * (t - math.sin(w * t + phase) / w)
+
+    p, d = p0.tolist(), d0.tolist()
+    lo, hi = low.tolist(), high.tolist()
+    out, s_prev = [list(p)], travelled_m(0.0)
+    for k in range(1, n):
+        s_now = travelled_m(k * dt)
+        _advance(p, d, s_now - s_prev, lo, hi)
+        s_prev = s_now
+        out.append(list(p))
+    first, times = (2.0 * math.pi - phase) / w, []  # the first set-off is in (0, accel_period_s]
+    while first + len(times) * spec.accel_period_s < spec.horizon_s:
+        times.append(first + len(times) * spec.accel_period_s)
+    return GridMotion(points_m=np.asarray(out), grid_dt_s=dt, change_times_s=tuple(times))
+
+
 def make_motion(spec: TargetSpec, seed: int) -> TargetMotion:
     """Draw the target motion of ``spec`` from ``seed`` (same seed, same motion)."""
     if not isinstance(spec, TargetSpec):
@@ -331,10 +503,7 @@ def make_motion(spec: TargetSpec, seed: int) -> TargetMotion:
         return StaticMotion(point_m=_start_point(spec, rng, low, high))
     if spec.kind == "linear":
         start = _start_point(spec, rng, low, high)
-        direction = _random_unit(rng)
-        if high[2] - low[2] < PLANAR_EXTENT_M:  # a flat workspace (objects at one height): move horizontally
-            direction[2] = 0.0
-            direction /= max(np.linalg.norm(direction), 1e-12)
+        direction = _course_direction(rng, low, high)
         return LinearMotion(start_m=start, velocity_m_s=spec.speed_m_s * direction, low_m=low, high_m=high)
     if spec.kind == "circle":
         r = spec.circle_radius_m
@@ -352,4 +521,10 @@ def make_motion(spec: TargetSpec, seed: int) -> TargetMotion:
         return CircleMotion(centre_m=centre, radius_m=r, rate_rad_s=sign * spec.speed_m_s / r, phase_rad=phase)
     if spec.kind == "random_walk":
         return _random_walk(spec, rng, low, high)
+    if spec.kind == "reversal":
+        return _reversal(spec, rng, low, high)
+    if spec.kind == "swerve":
+        return _swerve(spec, rng, low, high)
+    if spec.kind == "accelerating":
+        return _accelerating(spec, rng, low, high)
     return _jump(spec, rng, low, high)

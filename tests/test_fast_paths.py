@@ -105,8 +105,9 @@ def test_plan_sample_kernel_matches_mpc_plan():
             np.testing.assert_allclose(row, ref, atol=1e-12)
 
 
+@pytest.mark.parametrize("tail", ["resting", "leading"])
 @pytest.mark.parametrize("rule", ["snap", "displacement", "none"])
-def test_vectorized_preview_equals_pointwise_reference(rule):
+def test_vectorized_preview_equals_pointwise_reference(rule, tail):
     from controllers.retarget import RetargetConfig
     from mmact_ctrl.chunk import ActionChunk
     from mmact_ctrl.config import StackConfig
@@ -120,11 +121,17 @@ def test_vectorized_preview_equals_pointwise_reference(rule):
     times = 0.29 + np.linspace(-0.5, 2.5, 61)  # before, inside and after the chunk
     np.testing.assert_allclose(ctrl.reference_positions(times), np.array([ctrl.reference(t)[0] for t in times]))
     wp = np.zeros((16, 7))
-    wp[:, :3] = np.linspace([0.3, 0.0, 0.5], [0.52, 0.12, 0.21], 16)
+    if tail == "resting":  # min-jerk to rest at the aim: the rule's resting-chunk form
+        s = np.linspace(0.0, 1.0, 16)
+        s = s**3 * (10 - 15 * s + 6 * s**2)
+        wp[:, :3] = np.array([0.3, 0.0, 0.5]) + s[:, None] * np.array([0.22, 0.12, -0.29])
+    else:  # a constant-velocity tail that passes the target's course: a leading chunk
+        wp[:, :3] = np.linspace([0.4, 0.05, 0.3], [0.56, 0.12, 0.2], 16)
     ctrl.activate(ActionChunk(waypoints=wp, dt_s=0.1, t0_s=0.1), 0.3, ctrl.target_estimate(0.29))
     preview = ctrl.reference_positions(times)
     np.testing.assert_allclose(preview, np.array([ctrl.reference(t)[0] for t in times]), atol=1e-12)
-    assert (rule == "none") != ctrl._trusted  # the retargeting branch was exercised for snap / displacement
+    # the retargeting branch was exercised for snap / displacement
+    assert (rule == "none") != bool(np.any(ctrl.executor.offset(1.0, ctrl.active)[0]))
 
 
 def test_linear_motion_fast_path_equals_numpy_fold():
