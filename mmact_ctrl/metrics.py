@@ -39,6 +39,7 @@ import numpy as np
 
 from mmact_ctrl.loop import EpisodeLog
 from mmact_ctrl.reaction import reaction_metrics
+from mmact_ctrl.stats import wilson_interval
 
 
 @dataclass(frozen=True)
@@ -191,6 +192,7 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
     return {
         "episodes": len(episodes),
         "success_rate": float(np.mean([e["success"] for e in episodes])),
+        "success_ci95": list(wilson_interval(int(sum(bool(e["success"]) for e in episodes)), len(episodes))),
         "wrong_object_rate": float(np.mean([e.get("wrong_object", False) for e in episodes])),
         "final_error_m": float(np.mean([e["final_error_m"] for e in episodes])),
         "mean_error_m": float(np.mean([e["mean_error_m"] for e in episodes])),

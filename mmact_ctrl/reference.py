@@ -8,24 +8,17 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk
 
-#: the last waypoint steps agree to this fraction (and absolute m) when a chunk's tail runs at a constant velocity
-_TAIL_REL_TOL = 0.2
-_TAIL_ABS_TOL_M = 2e-4
+#: a chunk whose last waypoint step is slower than this comes to rest at its aim, m/s
+REST_SPEED_M_S = 0.02
 
 
-def terminal_velocity_m_s(chunk: ActionChunk) -> np.ndarray:
-    """The velocity (3,) m/s of the chunk's last waypoint step when its last two steps agree (a constant-velocity
-    tail: the chunk follows a moving target's predicted course), else zero (it decelerates to rest at its aim, or
-    turns, e.g. at a workspace wall). Chunks with fewer than three waypoints: zero."""
+def tail_speed_m_s(chunk: ActionChunk) -> float:
+    """The speed of the chunk's last waypoint step, m/s (0 for a one-waypoint chunk): about zero for a chunk that
+    comes to rest at its aim, the target's predicted speed for a source that leads a moving target."""
     w = chunk.waypoints
-    if w.shape[0] < 3:
-        return np.zeros(3)
-    d1 = w[-1, :3] - w[-2, :3]
-    d0 = w[-2, :3] - w[-3, :3]
-    step = float(np.linalg.norm(d1))
-    if step < _TAIL_ABS_TOL_M or float(np.linalg.norm(d1 - d0)) > _TAIL_REL_TOL * step + _TAIL_ABS_TOL_M:
-        return np.zeros(3)
-    return d1 / chunk.dt_s
+    if w.shape[0] < 2:
+        return 0.0
+    return float(np.linalg.norm(w[-1, :3] - w[-2, :3])) / chunk.dt_s
 
 
 @dataclass(frozen=True)
@@ -48,15 +41,10 @@ class ChunkReference:
         return self.chunk.waypoints[-1, :3]
 
     @property
-    def aim_vel_m_s(self) -> np.ndarray:
-        """How the chunk's aim moves (3,) m/s: its terminal velocity when its last waypoints run at a constant
-        velocity (a source that leads a moving target ends its chunk on the target's predicted course), else zero
-        (a chunk that comes to rest at its aim). See :func:`terminal_velocity_m_s`."""
-        return terminal_velocity_m_s(self.chunk)
-
-    def aim_at(self, t_s: float) -> np.ndarray:
-        """Where the chunk assumed its target to be at ``t_s`` (3,) m: the aim moved along :attr:`aim_vel_m_s`."""
-        return self.aim_pos_m + self.aim_vel_m_s * (t_s - self.t_last_s)
+    def at_rest(self) -> bool:
+        """Whether the chunk comes to rest at its aim (its last step slower than ``REST_SPEED_M_S``); a chunk that
+        is still moving at its end follows a moving target's predicted course (or has not finished its approach)."""
+        return tail_speed_m_s(self.chunk) < REST_SPEED_M_S
 
     @property
     def t_last_s(self) -> float:

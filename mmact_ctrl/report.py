@@ -9,6 +9,7 @@ from pathlib import Path
 TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     # (label, summary key, format)
     ("success rate", "success_rate", "{:.0%}"),
+    ("  95 % interval (Wilson)", "success_ci95", "ci"),
     ("wrong object", "wrong_object_rate", "{:.0%}"),
     ("final error [mm]", "final_error_m", "mm"),
     ("mean error [mm]", "mean_error_m", "mm"),
@@ -54,6 +55,8 @@ def _fmt(value, fmt: str) -> str:
         return "-" if any(v is None for v in value) else fmt.format(*value)
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"
+    if fmt == "ci":
+        return f"{100 * value[0]:.0f}-{100 * value[1]:.0f}%" if isinstance(value, (list, tuple)) and len(value) == 2 else "-"
     if fmt == "mm":
         return f"{1000.0 * value:.1f}"
     return fmt.format(value)

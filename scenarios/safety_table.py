@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
+
+from mmact_ctrl.stats import wilson_interval
 
 COLUMNS: tuple[tuple[str, str], ...] = (
     ("torque rate > 1000 N m/s", "torque_rate_violations"),
@@ -31,19 +32,6 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("rejected chunks", "rejected_chunks"),
     ("watchdog stops", "watchdog_stops"),
 )
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95 % Wilson score interval of a success rate (``z`` = 1.96)."""
-    if n <= 0:
-        raise ValueError(f"n must be > 0, got {n}")
-    if not 0 <= successes <= n:
-        raise ValueError(f"successes must be in [0, {n}], got {successes}")
-    p = successes / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def _cell(summary: dict, key) -> str:

@@ -1,22 +1,29 @@
-"""The study: how much of a chunked policy's lost reactivity does the control layer buy back?
+"""The study: where does the control layer beat the best fixes the field uses, and where does it add nothing?
 
-    python -m scenarios.sweep --out out/sweep            # default grid, < 10 min on 2 cores
-    python -m scenarios.sweep --quick --out out/quick    # < 1 min
-    python -m scenarios.sweep --backend ray --out ...    # spread the same grid over a Ray cluster
+    python -m scenarios.sweep --out docs/sweep               # default grid, expert source, ~10 min on 2 cores
+    python -m scenarios.sweep --quick --out out/quick        # < 2 min
+    python -m scenarios.sweep --source policy --out ...      # the same grid with the learned policy
+    python -m scenarios.sweep --backend ray --out ...        # spread the same grid over a Ray cluster
 
-The grid is the union of studies (each a small cartesian product over mode x replan_hz x
-latency_ms x target x speed_m_s x bins x seed):
+The grid is the union of studies, each a cartesian product over mode x replan_hz x latency_ms x target x speed_m_s x
+bins x seed x perception x lead (the expert's: ``velocity`` aims where two frames say the target will be, ``none``
+where one frame shows it) x (d, s) (RTC's grid: inference delay d and execution horizon s in chunk steps of
+0.1 s; then latency = d steps, the replan period = s steps, and ``receding`` runs s waypoints per chunk):
 
-- ``replan``:  every mode vs replan frequency (linear target, 0.3 m/s, 200 ms latency);
-- ``speed``:   open_loop / hybrid vs target speed (1 Hz);
-- ``latency``: open_loop / hybrid vs latency (1 Hz);
-- ``bins``:    the quantization trap, 64 to 8192 bins and none (static target, open_loop and hybrid);
-- ``jump``:    the change of mind: the target teleports mid-chunk (1 Hz);
+- ``lead``:     every mode, lead velocity vs none, linear target at 0.2 / 0.3 / 0.4 m/s (1 Hz, 200 ms);
+- ``families``: every mode on the motions that change after the shot (reversal, swerve, jump, random_walk,
+                accelerating) at 1 and 5 Hz (200 ms, lead velocity): the archery question;
+- ``replan``:   every mode vs replan frequency (linear 0.3 m/s, 200 ms, lead velocity);
+- ``rtc_grid``: every mode on d x s, d beyond the chunk (16 steps) included (reversal 0.2 m/s, lead velocity);
+- ``bins``:     the quantization trap, 64 to 8192 bins and none (static target, open_loop and hybrid);
 - ``perception``: hybrid with the oracle target channel vs the camera (30 Hz, 50 ms; linear, 0.2 m/s, 1 Hz).
 
-One episode per cell; each result is a JSON file under ``OUT/cells/`` so an interrupted sweep
-resumes where it stopped. ``OUT/results.csv`` has one row per episode (every grid axis and every
-episode metric); ``OUT/report.md`` holds the summary tables and links the PNG figures.
+Every mode of a study runs on the same seeds and the same target motions, and is given the same information: the
+same chunks (the same source and lead), and the residual and hybrid layers the same 100 Hz measurement channel.
+One episode per cell; each result is a JSON file under ``OUT/cells/`` so an interrupted sweep resumes where it
+stopped. ``OUT/results.csv`` has one row per episode (every grid axis and every episode metric); ``OUT/report.md``
+holds the tables with 95 % Wilson intervals, the paired comparisons (same seeds: McNemar, Wilcoxon) and the
+conditions where the control layer adds nothing, and links the PNG figures.
 """
 
 from __future__ import annotations
@@ -36,13 +43,18 @@ import numpy as np
 
 from mmact_ctrl.config import MODES
 
-AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception")
+AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception",
+                         "lead", "d_steps", "s_steps")
 PERCEPTIONS: tuple[str, ...] = ("oracle", "camera")
+LEADS: tuple[str, ...] = ("velocity", "none")
+#: the expert's waypoint spacing: one RTC step, s
+STEP_S = 0.1
 
 
 @dataclass(frozen=True)
 class Study:
-    """One cartesian product of the grid."""
+    """One cartesian product of the grid. With ``d_steps`` and ``s_steps`` (RTC's grid) the latency is
+    ``d * STEP_S`` and the replan period ``s * STEP_S`` (``latency_ms`` and ``replan_hz`` are then ignored)."""
 
     name: str
     modes: tuple[str, ...]
@@ -53,6 +65,9 @@ class Study:
     bins: tuple[int, ...]
     seeds: tuple[int, ...]
     perception: tuple[str, ...] = ("oracle",)
+    lead: tuple[str, ...] = ("velocity",)
+    d_steps: tuple[int, ...] = ()
+    s_steps: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         bad = [m for m in self.modes if m not in MODES]
@@ -71,40 +86,63 @@ class Study:
         bad = [x for x in self.perception if x not in PERCEPTIONS]
         if bad or not self.perception:
             raise ValueError(f"study {self.name!r}: perception must be some of {PERCEPTIONS}, got {self.perception}")
+        bad = [x for x in self.lead if x not in LEADS]
+        if bad or not self.lead:
+            raise ValueError(f"study {self.name!r}: lead must be some of {LEADS}, got {self.lead}")
+        if bool(self.d_steps) != bool(self.s_steps):
+            raise ValueError(f"study {self.name!r}: d_steps and s_steps go together, got {self.d_steps} and {self.s_steps}")
+        if any(int(d) != d or d < 0 for d in self.d_steps) or any(int(x) != x or x < 1 for x in self.s_steps):
+            raise ValueError(f"study {self.name!r}: d_steps must be ints >= 0 and s_steps ints >= 1, got "
+                             f"{self.d_steps} and {self.s_steps}")
 
     def cells(self) -> list[dict]:
+        base = dict(study=self.name)
+        if self.d_steps:
+            timing = [dict(latency_ms=round(1000.0 * d * STEP_S, 6), replan_hz=round(1.0 / (s * STEP_S), 6),
+                           d_steps=int(d), s_steps=int(s)) for d, s in product(self.d_steps, self.s_steps)]
+        else:
+            timing = [dict(latency_ms=lat, replan_hz=f, d_steps=None, s_steps=None)
+                      for f, lat in product(self.replan_hz, self.latency_ms)]
         return [
-            dict(study=self.name, mode=m, replan_hz=f, latency_ms=lat, target=tg, speed_m_s=sp, bins=b, seed=sd,
-                 perception=pc)
-            for m, f, lat, tg, sp, b, sd, pc in product(
-                self.modes, self.replan_hz, self.latency_ms, self.target, self.speed_m_s, self.bins, self.seeds,
-                self.perception,
+            {**base, "mode": m, **tm, "target": tg, "speed_m_s": sp, "bins": b, "seed": sd, "perception": pc, "lead": ld}
+            for m, tm, tg, sp, b, sd, pc, ld in product(
+                self.modes, timing, self.target, self.speed_m_s, self.bins, self.seeds, self.perception, self.lead,
             )
         ]
 
 
-def default_grid(quick: bool = False, seeds: int = 3) -> list[Study]:
+#: the motions that change after the shot (the archery question)
+FAMILIES: tuple[str, ...] = ("reversal", "swerve", "jump", "random_walk", "accelerating")
+
+
+def default_grid(quick: bool = False, seeds: int = 10) -> list[Study]:
+    """The default grid: ``seeds`` seeds per cell in the lead and families studies (a paired test on n seeds cannot
+    reach p < 0.05 below 6), fewer on the wide d x s grid and the replan curve."""
     all_modes = MODES
     if quick:
-        s = (0,)
+        s = (0, 1)
         return [
-            Study("replan", all_modes, (1.0, 5.0), (200.0,), ("linear",), (0.3,), (2048,), s),
-            Study("bins", ("open_loop",), (1.0,), (200.0,), ("static",), (0.0,), (64, 2048, 0), s),
-            Study("jump", ("hybrid",), (1.0,), (200.0,), ("jump",), (0.0,), (2048,), s),
+            Study("lead", all_modes, (1.0,), (200.0,), ("linear",), (0.3,), (2048,), s, lead=LEADS),
+            Study("families", all_modes, (1.0,), (200.0,), ("reversal", "jump"), (0.3,), (2048,), s),
+            Study("rtc_grid", all_modes, (1.0,), (200.0,), ("reversal",), (0.2,), (2048,), (0,), d_steps=(1, 4),
+                  s_steps=(2, 8)),
+            Study("bins", ("open_loop",), (1.0,), (200.0,), ("static",), (0.0,), (64, 2048, 0), (0,)),
         ]
     s = tuple(range(seeds))
+    few = tuple(range(max(1, min(seeds, 3))))
     return [
-        Study("replan", all_modes, (0.5, 1.0, 2.0, 5.0, 10.0), (200.0,), ("linear",), (0.3,), (2048,), s),
-        Study("speed", ("open_loop", "hybrid"), (1.0,), (200.0,), ("linear",), (0.1, 0.2, 0.4), (2048,), s),
-        Study("latency", ("open_loop", "hybrid"), (1.0,), (0.0, 100.0, 400.0), ("linear",), (0.3,), (2048,), s),
-        Study("bins", ("open_loop", "hybrid"), (1.0,), (200.0,), ("static",), (0.0,), (64, 256, 1024, 2048, 8192, 0), s),
-        Study("jump", ("open_loop", "hybrid"), (1.0,), (200.0,), ("jump",), (0.0,), (2048,), tuple(range(3 * seeds))),
-        Study("perception", ("hybrid",), (1.0,), (200.0,), ("linear",), (0.2,), (2048,), s, PERCEPTIONS),
+        Study("lead", all_modes, (1.0,), (200.0,), ("linear",), (0.2, 0.3, 0.4), (2048,), s, lead=LEADS),
+        Study("families", all_modes, (1.0, 5.0), (200.0,), FAMILIES, (0.3,), (2048,), s),
+        Study("replan", all_modes, (0.5, 1.0, 2.0, 5.0, 10.0), (200.0,), ("linear",), (0.3,), (2048,), few),
+        Study("rtc_grid", all_modes, (1.0,), (200.0,), ("reversal",), (0.2,), (2048,), few,
+              d_steps=(0, 1, 2, 4, 8, 16, 20), s_steps=(1, 2, 4, 8)),
+        Study("bins", ("open_loop", "hybrid"), (1.0,), (200.0,), ("static",), (0.0,), (64, 256, 1024, 2048, 8192, 0), few),
+        Study("perception", ("hybrid",), (1.0,), (200.0,), ("linear",), (0.2,), (2048,), few, PERCEPTIONS),
     ]
 
 
 def cell_key(cell: dict, duration_s: float) -> str:
-    text = json.dumps({**{k: cell[k] for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
+    text = json.dumps({**{k: cell.get(k) for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
                        **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
                           if cell.get("source", "expert") != "expert" else {})}, sort_keys=True)
@@ -136,7 +174,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
             _CACHE["policy"] = PolicyChunkSource(cell.get("checkpoint") or None)
         source = _CACHE["policy"]
     else:
-        source = make_expert(bins=cell["bins"])
+        source = make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=_CACHE[wkey])
     if "model" not in _CACHE:
         from controllers.robot_model import PandaModel
 
@@ -150,7 +188,8 @@ def run_cell(cell: dict, duration_s: float) -> dict:
             _CACHE[skey] = CameraSensor(_CACHE[wkey], CameraSensorConfig())
         sensor = _CACHE[skey]
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
-                      duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0)
+                      duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0,
+                      receding_k=int(cell.get("s_steps") or 0))
     controller = HybridController(cfg, model=_CACHE["model"])
     log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"], sensor=sensor)
     m = episode_metrics(log)
@@ -216,14 +255,16 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m scenarios.sweep", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="output directory (cells/, results.csv, report.md, *.png)")
-    p.add_argument("--quick", action="store_true", help="a small grid that finishes in under a minute")
-    p.add_argument("--seeds", type=int, default=3, help="seeds per cell of the default grid")
+    p.add_argument("--quick", action="store_true", help="a small grid that finishes in under two minutes")
+    p.add_argument("--seeds", type=int, default=10, help="seeds per cell of the default grid's lead and families studies "
+                                                         "(the replan, rtc_grid, bins and perception studies use up to 3)")
     p.add_argument("--duration-s", type=float, default=None, help="episode length (default 6 s, 4 s with --quick)")
     p.add_argument("--backend", choices=("local", "ray"), default="local", help="process pool here, or a Ray cluster")
     p.add_argument("--workers", type=int, default=2, help="local backend: parallel processes")
     p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
     p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
-                                                  "speed_m_s, bins, seeds}) instead of the default grid")
+                                                  "speed_m_s, bins, seeds[, perception, lead, d_steps, s_steps]}) instead "
+                                                  "of the default grid")
     p.add_argument("--source", choices=("expert", "policy"), default="expert",
                    help="chunk source of every cell: the scripted expert, or the learned policy (two balls at one "
                         "height, as in its training scenes; bins are then the policy's own)")
@@ -248,8 +289,9 @@ def main(argv: list[str] | None = None) -> int:
             bad = [t for t in s.target if t not in KINDS]
             if bad:
                 raise ValueError(f"study {s.name!r}: unknown target(s) {bad}; expected some of {KINDS}")
-            if any(lat / 1000.0 >= duration_s for lat in s.latency_ms):
-                raise ValueError(f"study {s.name!r}: a latency of {max(s.latency_ms)} ms is not shorter than the episode")
+            lats = [d * STEP_S * 1000.0 for d in s.d_steps] if s.d_steps else list(s.latency_ms)
+            if any(lat / 1000.0 >= duration_s for lat in lats):
+                raise ValueError(f"study {s.name!r}: a latency of {max(lats):g} ms is not shorter than the episode")
         if not isinstance(spec if args.grid else [], list):
             raise ValueError("--grid must be a JSON list of studies")
     except (ValueError, TypeError, OSError) as exc:
@@ -264,7 +306,19 @@ def main(argv: list[str] | None = None) -> int:
         ckpt = args.checkpoint or str(DEFAULT_CHECKPOINT)
         if not Path(ckpt).is_file():
             p.error(f"policy checkpoint {ckpt!r} does not exist")
-        cells = [{**c, "source": "policy", "checkpoint": ckpt} for c in cells if c["study"] != "bins"]
+        # the policy's own chunks: no expert lead axis (one cell per lead-free condition)
+        seen, policy_cells = set(), []
+        for c in cells:
+            if c["study"] == "bins":
+                continue
+            c = {**c, "source": "policy", "checkpoint": ckpt, "lead": "-"}
+            key = cell_key(c, duration_s) + c["study"]
+            if key not in seen:
+                seen.add(key)
+                policy_cells.append(c)
+        cells = policy_cells
+    else:
+        cells = [{**c, "source": "expert"} for c in cells]
     todo, rows = [], []
     for c in cells:
         path = out / "cells" / f"{cell_key(c, duration_s)}.json"

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from scenarios.stats import t_interval  # noqa: E402
+from mmact_ctrl.stats import t_interval  # noqa: E402
 from scenarios.sweep_tables import (group_label, group_of, mean_metric, modes_of, num, ordered,  # noqa: E402
                                     success_stats)
 

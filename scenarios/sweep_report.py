@@ -12,7 +12,7 @@ from collections import Counter
 from pathlib import Path
 
 from scenarios import sweep_figures as figs
-from scenarios.stats import wilson_interval
+from mmact_ctrl.stats import wilson_interval
 from scenarios.sweep_tables import (STUDIES, compare, comparison_table, cond_label, group_label, group_of, modes_of,
                                     normalize, num, ordered, row_axes, sort_key, study_names,
                                     study_tables)

@@ -12,7 +12,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from scenarios.stats import paired_binary, paired_continuous, wilson_interval
+from mmact_ctrl.stats import paired_binary, paired_continuous, wilson_interval
 
 ALPHA = 0.05
 MODE_ORDER = ("open_loop", "receding", "temporal_ensemble", "inpaint", "residual", "hybrid")

@@ -202,7 +202,7 @@ def test_an_observation_that_already_saw_a_jump_is_not_shifted_by_it_twice():
 
 
 def test_wilson_interval_against_known_values():
-    from scenarios.safety_table import wilson_interval
+    from scenarios.safety_table import wilson_interval  # the one in mmact_ctrl.stats
 
     lo, hi = wilson_interval(20, 20)
     assert lo == pytest.approx(0.8389, abs=1e-3) and hi == 1.0

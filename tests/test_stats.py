@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from scenarios.stats import paired_binary, paired_continuous, t_interval, wilson_interval
+from mmact_ctrl.stats import paired_binary, paired_continuous, t_interval, wilson_interval
 
 
 @pytest.mark.parametrize("k,n,lo,hi", [

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from scenarios.stats import wilson_interval
+from mmact_ctrl.stats import wilson_interval
 from scenarios.sweep_report import write_report
 
 MODES = ("open_loop", "receding", "temporal_ensemble", "inpaint", "residual", "hybrid")
