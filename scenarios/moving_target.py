@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         t0 = time.perf_counter()
         payload = run(args)
-    except ValueError as exc:  # bad configuration: one clear line
+    except (ValueError, FileNotFoundError) as exc:  # bad configuration, a missing checkpoint: one clear line
         parser.error(str(exc))
     logs = payload.pop("_logs")
     # a static target has no speed: printing --speed's default next to it read as if it moved

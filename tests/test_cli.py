@@ -7,6 +7,7 @@ import sys
 import pytest
 
 from scenarios.moving_target import main
+from scenarios.targets import KINDS
 
 BAD = [
     (["--replan-hz", "-1"], "--replan-hz"),
@@ -24,6 +25,9 @@ BAD = [
     (["--latency-ms", "soon"], "--latency-ms"),
     (["--source", "policy", "--checkpoint", "/nonexistent/ckpt.pt"], "checkpoint"),
     (["--refine-bins", "-3"], "--refine-bins"),
+    (["--expert-lead", "psychic"], "--expert-lead"),
+    (["--mode", "warp"], "--mode"),
+    (["--mode", "residual", "--residual-checkpoint", "/nonexistent/res.pt"], "residual"),
 ]
 
 
@@ -56,3 +60,12 @@ def test_json_and_plot_outputs(tmp_path, capsys):
     assert out_png.stat().st_size > 10_000
     table = capsys.readouterr().out
     assert "open_loop" in table and "hybrid" in table and "success rate" in table
+
+
+@pytest.mark.parametrize("source", ["expert", "policy"])
+@pytest.mark.parametrize("target", KINDS)
+def test_every_target_runs_with_every_source(target, source, capsys):
+    """Each motion family in the source's own scene (the policy's: two balls on its plane), one short episode."""
+    assert main(["--source", source, "--target", target, "--mode", "open_loop", "--episodes", "1", "--duration-s", "0.6",
+                 "--quiet"]) == 0
+    assert "success rate" in capsys.readouterr().out
