@@ -13,6 +13,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("wrong object", "wrong_object_rate", "{:.0%}"),
     ("final error [mm]", "final_error_m", "mm"),
     ("mean error [mm]", "mean_error_m", "mm"),
+    ("  after first reach [mm]", "mean_error_after_reach_m", "mm"),
     ("time to reach [s]", "time_to_reach_s", "{:.2f}"),
     ("tracking ratio", "tracking_ratio", "{:.2f}"),
     ("jerk RMS [m/s^3]", "jerk_rms", "{:.1f}"),

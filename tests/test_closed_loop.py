@@ -150,3 +150,31 @@ def test_mpc_in_the_loop_keeps_limits_and_a_failed_solve_falls_back():
     assert m2["limit_violations"] == 0 and m2["qp_failures"] == 0
     assert m2["final_error_m"] < 0.05
     world.close()
+
+
+def test_mean_error_after_reach_leaves_out_the_approach():
+    """A synthetic episode: 1 s approach from 0.3 m at constant speed, then 5 mm off the target for 2 s. The plain
+    mean carries the approach, ``mean_error_after_reach_m`` is the 5 mm of following from the first success window
+    on; an episode that never reaches the target has NaN there, and the summary averages the ones that did."""
+    from mmact_ctrl.loop import EpisodeLog
+    from mmact_ctrl.metrics import summarize
+
+    def log_for(err_m: np.ndarray, seed: int = 0) -> EpisodeLog:
+        n = len(err_m)
+        ee = np.zeros((n, 3))
+        ee[:, 0] = err_m
+        return EpisodeLog(seed=seed, t_s=np.arange(n) * 1e-3, ee_pos_m=ee, target_pos_m=np.zeros((n, 3)),
+                          ref_pos_m=np.zeros((n, 3)), q_rad=np.zeros((n, 7)), dq_rad_s=np.zeros((n, 7)),
+                          tau_cmd_nm=np.zeros((n, 7)), tick_us=np.ones(n))
+
+    err = np.concatenate([np.linspace(0.3, 0.005, 1000), np.full(2000, 0.005)])
+    m = episode_metrics(log_for(err))
+    assert m["success"]
+    assert m["mean_error_m"] > 0.05
+    start = int(round(m["time_to_reach_s"] / 1e-3))
+    assert m["mean_error_after_reach_m"] == pytest.approx(err[start:].mean())
+    assert m["mean_error_after_reach_m"] < 0.006
+    never = episode_metrics(log_for(np.full(3000, 0.1), seed=1))
+    assert not never["success"] and np.isnan(never["mean_error_after_reach_m"])
+    s = summarize([m, never], np.ones(10))
+    assert s["mean_error_after_reach_m"] == pytest.approx(m["mean_error_after_reach_m"])
