@@ -2,8 +2,14 @@
 (``policy.residual.ResidualPolicy``, trained by ``python -m scenarios.train_residual``) takes the base waypoint being
 executed, the time since the chunk's observation, the latest target measurements of the 100 Hz channel (the one
 hybrid reads: the latest and the one ``history_s`` before it, nothing more) and the TCP state, and outputs a bounded
-task-space correction; the 1 kHz QP tracks base waypoint + correction (held between updates). No retargeting, no
-Ruckig, no MPC: the correction is the only layer.
+task-space correction; the 1 kHz QP tracks base waypoint + correction. No retargeting, no Ruckig, no MPC: the
+correction is the only layer.
+
+The correction applied moves toward each new network output at most ``max_rate_m_s`` and is interpolated between
+updates (a first-order hold: continuous, one update late). When a new chunk becomes active, the correction is
+re-expressed against the new base chunk so that the reference does not jump (``c = previous reference - new
+base``) and then moves toward the network's output for the new base: a source that plans from the measured TCP
+(which the correction has already moved) is not corrected twice.
 """
 
 from __future__ import annotations
@@ -21,6 +27,8 @@ class ResidualExecutor(ClockedExecutor):
 
     name = "residual"
     layers = Layers(reads_target=True)
+    #: the applied correction moves at most this fast toward the network's output, m/s
+    max_rate_m_s = 1.0
 
     def __init__(self, policy=None) -> None:
         """Args:
@@ -29,7 +37,10 @@ class ResidualExecutor(ClockedExecutor):
         super().__init__()
         self.policy = policy
         self._meas: list[tuple[float, np.ndarray]] = []  # (t_capture_s, pos_m) of the measurements seen, oldest first
-        self._corr = _ZERO3
+        self._base: ChunkReference | None = None  # the chunk the applied correction is relative to
+        self._from = _ZERO3  # the applied correction at the last update
+        self._to = _ZERO3  # ... and one update period later
+        self._t_update_s = -1.0
         self._next_update_s = 0.0
         self._period_s = 0.01
         self.updates = 0
@@ -45,9 +56,25 @@ class ResidualExecutor(ClockedExecutor):
 
     def reset(self) -> None:
         self._meas = []
-        self._corr = _ZERO3
+        self._base = None
+        self._from = _ZERO3
+        self._to = _ZERO3
+        self._t_update_s = -1.0
         self._next_update_s = 0.0
         self.updates = 0
+
+    def activate(self, ref: ChunkReference, t_s: float) -> None:
+        carry = self._carry(t_s, ref)
+        self._base = ref
+        self._from = self._to = carry
+        self._t_update_s = t_s
+        self._next_update_s = t_s  # the network's correction for the new base from this tick on
+
+    def _carry(self, t_s: float, ref: ChunkReference) -> np.ndarray:
+        """The correction that keeps the reference where it is when ``ref`` replaces the current base chunk."""
+        if self._base is None:
+            return _ZERO3
+        return self._base.sample(t_s)[0][:3] + self._hold(t_s)[0] - ref.sample(t_s)[0][:3]
 
     def perceive(self, t_capture_s: float, z_m: np.ndarray | None) -> None:
         if z_m is None or not np.all(np.isfinite(z_m)):
@@ -85,11 +112,26 @@ class ResidualExecutor(ClockedExecutor):
         return corr if np.all(np.isfinite(corr)) else _ZERO3
 
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
-        active = self.controller.active
-        if ref is not active:  # a candidate chunk (the splice check): its correction now
-            return self._correction(t_s, ref), _ZERO3
+        """The applied correction at ``t_s`` for the active chunk; for a candidate (the splice check), the correction
+        it would start with (:meth:`_carry`)."""
+        if ref is not self._base:
+            return self._carry(t_s, ref), _ZERO3
         if t_s >= self._next_update_s - 1e-9:
-            self._corr = self._correction(t_s, ref)
+            now = self._hold(t_s)[0]
+            step = self._correction(t_s, ref) - now
+            limit = self.max_rate_m_s * self._period_s
+            norm = float(np.linalg.norm(step))
+            if norm > limit:
+                step = step * (limit / norm)
+            self._from, self._to, self._t_update_s = now, now + step, t_s
             self._next_update_s = t_s + self._period_s
             self.updates += 1
-        return self._corr, _ZERO3
+        return self._hold(t_s)
+
+    def _hold(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The first-order hold between the last update and the next: (correction m, its rate m/s)."""
+        if self._t_update_s < 0:
+            return _ZERO3, _ZERO3
+        x = min(max((t_s - self._t_update_s) / self._period_s, 0.0), 1.0)
+        rate = (self._to - self._from) / self._period_s if x < 1.0 else _ZERO3
+        return self._from + x * (self._to - self._from), rate
