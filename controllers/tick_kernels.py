@@ -293,16 +293,33 @@ def sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out
 
 
 @njit(cache=True, nogil=True)
-def absorb_jump(offset, offset_vel, offset_acc, ref, ref_vel, prev_ref, prev_vel, dt_s, new_offset, new_offset_vel):
+def absorb_jump(offset, offset_vel, offset_acc, ref, ref_vel, prev_ref, prev_vel, dt_s, pass_pos, pass_vel,
+                new_offset, new_offset_vel):
     """Relative Ruckig smoothing (``controllers.smoother``): the offset after absorbing this step's jump of
     the reference into ``new_offset``, ``new_offset_vel`` (3,); returns whether any offset is left to smooth
-    (position > 1e-9 m, velocity > 1e-7, acceleration > 1e-5)."""
+    (position > 1e-9 m, velocity > 1e-7, acceleration > 1e-5).
+
+    The jump is what the constant-velocity prediction ``prev_ref + prev_vel dt``, ``prev_vel`` did not predict.
+    Up to ``pass_pos`` (position, norm) and ``pass_vel`` (velocity, norm) of it passes through (a reference that
+    accelerates within the limits does that much in one step); only the excess is absorbed (0, 0: all of it)."""
+    jp0 = ref[0] - prev_ref[0] - prev_vel[0] * dt_s
+    jp1 = ref[1] - prev_ref[1] - prev_vel[1] * dt_s
+    jp2 = ref[2] - prev_ref[2] - prev_vel[2] * dt_s
+    jv0 = ref_vel[0] - prev_vel[0]
+    jv1 = ref_vel[1] - prev_vel[1]
+    jv2 = ref_vel[2] - prev_vel[2]
+    np_ = np.sqrt(jp0 * jp0 + jp1 * jp1 + jp2 * jp2)
+    nv = np.sqrt(jv0 * jv0 + jv1 * jv1 + jv2 * jv2)
+    kp = 0.0 if np_ <= pass_pos else 1.0 - pass_pos / np_  # the absorbed fraction
+    kv = 0.0 if nv <= pass_vel else 1.0 - pass_vel / nv
+    new_offset[0] = offset[0] - kp * jp0
+    new_offset[1] = offset[1] - kp * jp1
+    new_offset[2] = offset[2] - kp * jp2
+    new_offset_vel[0] = offset_vel[0] - kv * jv0
+    new_offset_vel[1] = offset_vel[1] - kv * jv1
+    new_offset_vel[2] = offset_vel[2] - kv * jv2
     active = False
     for i in range(3):
-        o = offset[i] - (ref[i] - prev_ref[i] - prev_vel[i] * dt_s)
-        ov = offset_vel[i] - (ref_vel[i] - prev_vel[i])
-        new_offset[i] = o
-        new_offset_vel[i] = ov
-        if abs(o) > 1e-9 or abs(ov) > 1e-7 or abs(offset_acc[i]) > 1e-5:
+        if abs(new_offset[i]) > 1e-9 or abs(new_offset_vel[i]) > 1e-7 or abs(offset_acc[i]) > 1e-5:
             active = True
     return active

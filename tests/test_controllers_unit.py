@@ -165,3 +165,38 @@ def test_relative_ruckig_absorbs_reference_jumps_within_limits_and_follows_witho
     final_ref = start + vel * 2.999 + np.array([0.05, 0.02, -0.03])
     assert np.linalg.norm(p[-1] - final_ref) < 1e-6  # no lag behind a moving reference
     assert sm.failures == 0
+
+
+def test_relative_ruckig_passes_a_curving_reference_through_and_still_absorbs_a_jump():
+    """At the MPC's 20 ms step, a circle's centripetal acceleration (2 m/s^2, below a_max) is the reference's own
+    motion: it passes through with no offset; a chunk-switch jump is still absorbed and smoothed."""
+    cfg = SmootherConfig(dt_s=0.02)
+    sm = TaskSpaceSmoother(cfg)
+    centre, radius, omega = np.array([0.5, 0.0, 0.3]), 0.08, 5.0  # 0.4 m/s, 2 m/s^2
+    circle = lambda t: (centre + radius * np.array([np.cos(omega * t), np.sin(omega * t), 0.0]),
+                        radius * omega * np.array([-np.sin(omega * t), np.cos(omega * t), 0.0]))
+    sm.reset(circle(0.0)[0], np.zeros(3))
+    sm._pos.prev_vel = circle(0.0)[1]  # already moving
+    gaps = []
+    for k in range(1, 100):
+        ref, vel = circle(k * cfg.dt_s)
+        p, *_ = sm.step(ref, vel, np.zeros(3))
+        gaps.append(np.linalg.norm(p - ref))
+    assert max(gaps) < 1e-9  # followed exactly, nothing absorbed
+    old = SmootherConfig(dt_s=0.02, pass_through=0.0)  # absorbing every change lags the curve
+    sm_old = TaskSpaceSmoother(old)
+    sm_old.reset(circle(0.0)[0], np.zeros(3))
+    sm_old._pos.prev_vel = circle(0.0)[1]
+    lag = [np.linalg.norm(sm_old.step(*circle(k * old.dt_s), np.zeros(3))[0] - circle(k * old.dt_s)[0])
+           for k in range(1, 100)]
+    assert np.mean(lag[20:]) > 1e-3
+    jump = np.array([0.03, 0.0, 0.0])  # a chunk switch on the curve
+    ref, vel = circle(100 * cfg.dt_s)
+    p, *_ = sm.step(ref + jump, vel, np.zeros(3))
+    assert np.linalg.norm(p - ref) < 0.01  # the 3 cm step does not show up at once
+    for k in range(101, 150):
+        ref, vel = circle(k * cfg.dt_s)
+        p, *_ = sm.step(ref + jump, vel, np.zeros(3))
+    assert np.linalg.norm(p - (ref + jump)) < 1e-6 and sm.failures == 0
+    with pytest.raises(ValueError, match="pass_through"):
+        SmootherConfig(pass_through=-1.0)
