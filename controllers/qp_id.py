@@ -81,6 +81,10 @@ class QPConfig:
         pos_err_max_m: the TCP position error of the PD term is saturated at this length, m: a reference that
             jumped far away (a stale plan dropped, a chunk switch) is approached at about
             ``kp_pos / kd_pos * pos_err_max_m`` (1 m/s), not at the 7 x error per second of a raw PD step.
+        tcp_vel_cap_m_s: the TCP velocity the PD term steers toward, ``v_ref + kp_pos / kd_pos * e``, is capped at
+            this speed (the reference velocity and acceleration feed-forward are scaled down with it), m/s: a
+            reference that moves or jumps faster than the Panda's 1.7 m/s end-effector limit (a fast correction on
+            top of a fast chunk) is followed at a speed the robot accepts.
     """
 
     kp_pos: float = 400.0
@@ -106,6 +110,7 @@ class QPConfig:
     a_margin: float = 0.97
     jerk_margin: float = 0.9
     pos_err_max_m: float = 0.1
+    tcp_vel_cap_m_s: float = 1.4
 
     def __post_init__(self) -> None:
         for name in ("kp_pos", "kd_pos", "kp_ori", "kd_ori", "kp_post", "kd_post", "w_pos", "w_ori", "w_post", "w_reg"):
@@ -117,6 +122,8 @@ class QPConfig:
             raise ValueError(f"QPConfig.v_margin must be in (0, 1], got {self.v_margin}")
         if not self.dt_s > 0:
             raise ValueError(f"QPConfig.dt_s must be > 0, got {self.dt_s}")
+        if not self.tcp_vel_cap_m_s > 0:
+            raise ValueError(f"QPConfig.tcp_vel_cap_m_s must be > 0, got {self.tcp_vel_cap_m_s}")
         if not self.pos_err_max_m > 0:
             raise ValueError(f"QPConfig.pos_err_max_m must be > 0, got {self.pos_err_max_m}")
         if not self.dtau_max_nm_s > 0:
@@ -177,7 +184,7 @@ class TaskSpaceQP:
         self._params = qp_params(self._kp6, self._kd6, self._w6, config.kp_post, config.kd_post, config.w_post,
                                  config.w_post + config.w_reg, b.q_hi, b.q_lo, b.v_max, b.a_max, self._tau_lim,
                                  config.dt_s, config.brake_horizon_s, self.dtau_step_nm, self._ddq_step,
-                                 config.pos_err_max_m)
+                                 config.pos_err_max_m, config.tcp_vel_cap_m_s)
         self._P_x = np.empty(len(self._p_idx))
         self._g = np.empty(n)
         self._A_x = np.empty(len(self._a_idx))
@@ -259,9 +266,16 @@ class TaskSpaceQP:
         e_norm = float(np.linalg.norm(e_pos))
         if e_norm > c.pos_err_max_m:
             e_pos = e_pos * (c.pos_err_max_m / e_norm)
+        ref_vel, ref_acc = ref.vel_m_s, ref.acc_m_s2
+        v_des = ref_vel + (self._kp6[:3] / self._kd6[:3]) * e_pos  # the TCP velocity the PD term steers toward
+        v_norm = float(np.linalg.norm(v_des))
+        if v_norm > c.tcp_vel_cap_m_s:
+            scale = c.tcp_vel_cap_m_s / v_norm
+            ref_vel = v_des * scale - (self._kp6[:3] / self._kd6[:3]) * e_pos
+            ref_acc = ref_acc * scale
         e6 = np.concatenate((e_pos, orientation_error(ref.rot, terms.rot)))
-        v6 = np.concatenate((ref.vel_m_s, ref.ang_vel_rad_s))
-        a6 = np.concatenate((ref.acc_m_s2, ref.ang_acc_rad_s2))
+        v6 = np.concatenate((ref_vel, ref.ang_vel_rad_s))
+        a6 = np.concatenate((ref_acc, ref.ang_acc_rad_s2))
         a_des = a6 + self._kp6 * e6 + self._kd6 * (v6 - terms.vel)
         ddq_post = c.kp_post * (ref.q_post_rad - q_rad) - c.kd_post * dq_rad_s
         J = terms.J

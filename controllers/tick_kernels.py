@@ -24,16 +24,18 @@ _Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = 22, 29, 36, 43, 50
 _DT, _INV_H, _DTAU = 57, 58, 59
 _DDQ_STEP = 60
 _E_MAX = 67
-N_PARAMS = 68
+_V_TCP = 68
+N_PARAMS = 69
 
 
 def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s,
-              dtau_step_nm, ddq_step_rad_s2, pos_err_max_m):
+              dtau_step_nm, ddq_step_rad_s2, pos_err_max_m, tcp_vel_cap_m_s=math.inf):
     """Pack the QP's constants into the flat vector :func:`assemble_qp` reads.
 
     ``dtau_step_nm``: the largest torque change per control step (rate limit x dt, with margin);
     ``ddq_step_rad_s2`` (7,): the largest change of the commanded joint acceleration per step (jerk limit x dt);
-    ``pos_err_max_m``: the TCP position error the PD term sees is saturated at this length."""
+    ``pos_err_max_m``: the TCP position error the PD term sees is saturated at this length;
+    ``tcp_vel_cap_m_s``: the TCP velocity the PD term steers toward is capped at this speed."""
     p = np.empty(N_PARAMS)
     p[_KP6:_KP6 + 6], p[_KD6:_KD6 + 6], p[_W6:_W6 + 6] = kp6, kd6, w6
     p[_KP_POST], p[_KD_POST], p[_W_POST], p[_P_DIAG] = kp_post, kd_post, w_post, p_diag
@@ -42,6 +44,7 @@ def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max,
     p[_DT], p[_INV_H], p[_DTAU] = dt_s, 1.0 / brake_horizon_s, dtau_step_nm
     p[_DDQ_STEP:_DDQ_STEP + 7] = ddq_step_rad_s2
     p[_E_MAX] = pos_err_max_m
+    p[_V_TCP] = tcp_vel_cap_m_s
     return p
 
 
@@ -189,8 +192,16 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
     # the position error is saturated at pos_err_max: a far reference is approached at a bounded speed
     en = math.sqrt((ref_pos[0] - pos[0]) ** 2 + (ref_pos[1] - pos[1]) ** 2 + (ref_pos[2] - pos[2]) ** 2)
     e_scale = params[_E_MAX] / en if en > params[_E_MAX] else 1.0
+    # the TCP velocity the PD term steers toward, v_ref + kp/kd e, capped at _V_TCP (feed-forward scaled with it)
+    vd = np.empty(3)
     for i in range(3):
-        e, v, a = (ref_pos[i] - pos[i]) * e_scale, ref_vel[i] - vel[i], ref_acc[i]
+        vd[i] = ref_vel[i] + params[_KP6 + i] / params[_KD6 + i] * (ref_pos[i] - pos[i]) * e_scale
+    vn = math.sqrt(vd[0] * vd[0] + vd[1] * vd[1] + vd[2] * vd[2])
+    v_scale = params[_V_TCP] / vn if vn > params[_V_TCP] else 1.0
+    for i in range(3):
+        e = (ref_pos[i] - pos[i]) * e_scale
+        rv = vd[i] * v_scale - params[_KP6 + i] / params[_KD6 + i] * e if v_scale < 1.0 else ref_vel[i]
+        v, a = rv - vel[i], ref_acc[i] * v_scale
         r[i] = dJv[i] - (a + params[_KP6 + i] * e + params[_KD6 + i] * v)
         e, v, a = e_rot[i], ref_w[i] - vel[3 + i], ref_dw[i]
         r[3 + i] = dJv[3 + i] - (a + params[_KP6 + 3 + i] * e + params[_KD6 + 3 + i] * v)

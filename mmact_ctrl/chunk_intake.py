@@ -47,6 +47,7 @@ class Pending:
     seq: int
     chunk: ActionChunk = field(compare=False)
     target_at_obs_m: np.ndarray | None = field(compare=False, default=None)
+    ee_at_obs_m: np.ndarray | None = field(compare=False, default=None)  # the TCP the chunk was planned from
 
 
 def chunk_problem(chunk, observation: Observation, token_range: tuple[int, int] | None) -> str | None:
@@ -119,9 +120,10 @@ class ChunkIntake:
             return None
         return chunk
 
-    def submit(self, t_active_s: float, chunk: ActionChunk, target_at_obs_m: np.ndarray | None) -> None:
+    def submit(self, t_active_s: float, chunk: ActionChunk, target_at_obs_m: np.ndarray | None,
+               ee_at_obs_m: np.ndarray | None = None) -> None:
         """Queue a valid chunk to become active at ``t_active_s``; the queue stays sorted by that time."""
-        bisect.insort(self.pending, Pending(float(t_active_s), self._seq, chunk, target_at_obs_m))
+        bisect.insort(self.pending, Pending(float(t_active_s), self._seq, chunk, target_at_obs_m, ee_at_obs_m))
         self._seq += 1
 
     def due(self, t_s: float) -> list[Pending]:

@@ -150,19 +150,26 @@ class HybridController:
         self.active = ChunkReference(chunk=chunk, t_active_s=t_s, target_at_obs_m=target_at_obs_m)
         self.executor.activate(self.active, t_s)
 
-    def splice_distance_m(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None) -> float:
+    def splice_distance_m(self, chunk: ActionChunk, t_s: float, target_at_obs_m: np.ndarray | None,
+                          ee_at_obs_m: np.ndarray | None = None) -> float:
         """How far the reference would jump at ``t_s`` if ``chunk`` became active now, m: the distance from where it
         would start (the executor's correction included, :meth:`start_position`) to the nearest of what the robot is
         following or doing now: the raw reference, the Ruckig-smoothed one (with smoothing: any jump of the raw reference is absorbed
         and smoothed away, so a start near either is no jump) and the TCP itself (a chunk that starts where the arm
         is, as a source planning from the observed state does while a fast arm lags its reference, asks for no jump
-        of the arm)."""
+        of the arm); or, given ``ee_at_obs_m``, the distance from the chunk's first waypoint to the TCP it was
+        planned from, whichever is smallest."""
         start = self.start_position(chunk, t_s, target_at_obs_m)
         gap = float(np.linalg.norm(start - self.reference(t_s)[0]))
         if self.smoothing and self._smoothed_pos is not None:
             gap = min(gap, float(np.linalg.norm(start - self._smoothed_pos)))
         if self.terms is not None:
             gap = min(gap, float(np.linalg.norm(start - self.terms.pos_m)))
+        if ee_at_obs_m is not None:
+            # a chunk whose path begins where the TCP was when it was observed is a plan of the robot's own motion,
+            # however late it arrives: a long inference delay puts its activation far along its path (the executor
+            # then catches up within the QP's speed bounds); a corrupted chunk begins elsewhere
+            gap = min(gap, float(np.linalg.norm(chunk.waypoints[0, :3] - np.asarray(ee_at_obs_m, dtype=float))))
         return gap
 
     def _target_at_observation(self, t0_s: float, recorded_m: np.ndarray | None) -> np.ndarray | None:

@@ -226,11 +226,11 @@ def run_episode(
                 log.clipped_actions += chunk.n_clipped
                 delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
                 delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
-                intake.submit(t + delay_s, chunk, controller.target_estimate(t))
+                intake.submit(t + delay_s, chunk, controller.target_estimate(t), obs.ee_pos_m)
             next_plan_s = executor.after_request(t, chunk, next_plan_s, replan_period_s)
         tick0 = time.perf_counter()
         for entry in intake.due(t + eps):
-            gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m)
+            gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m, entry.ee_at_obs_m)
             if intake.admit(entry, t, controller.active, gap_m=gap_m):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
                 log.chunk_active_s.append(t)

@@ -2,7 +2,9 @@
 # Issue 13 figures: camera perception, latency compensation, curving targets (expert source, hybrid).
 cd "$(dirname "$0")/../.."
 . .venv/bin/activate
-mt="python -m scenarios.moving_target --source expert --mode hybrid --episodes 20 --quiet"
+export MUJOCO_GL=egl
+# the single-frame expert (--expert-lead none), as the issue measured them
+mt="python -m scenarios.moving_target --source expert --expert-lead none --mode hybrid --episodes 20 --quiet"
 out=docs/perception
 for tgt in linear static jump; do
   $mt --target $tgt --perception camera --json $out/camera_$tgt.json > $out/camera_$tgt.txt
