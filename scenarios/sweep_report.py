@@ -94,6 +94,13 @@ def _paired_section(rows: list[dict]) -> tuple[list[str], list[dict]]:
             all_comps += comps
             axes = row_axes([r for r in rows if r["study"] == study], study, include_source=True)
             parts += [f"### {study}", "", *comparison_table(comps, axes)]
+    chunk_only = tuple(m for m in modes_of(rows) if m not in ("hybrid", "residual"))
+    for study in ("lead", "families"):
+        comps = compare(rows, "hybrid", None, study=study, candidates=chunk_only)
+        if comps:
+            axes = row_axes([r for r in rows if r["study"] == study], study, include_source=True)
+            parts += [f"### {study}: hybrid vs the best chunk-only baseline ({', '.join(chunk_only)}: the methods "
+                      "that do not read the measurement channel)", "", *comparison_table(comps, axes)]
     res = compare(rows, "residual", "open_loop", study="families", where=lambda c: num(c["replan_hz"]) == 1.0)
     if res:
         axes = row_axes([r for r in rows if r["study"] == "families"], "families", include_source=True)

@@ -36,8 +36,9 @@ STUDIES = {
     "lead": ("lead: target-velocity feed-forward in the chunk source (linear target, 1 Hz, 200 ms)",
              ("lead", "speed_m_s")),
     "families": ("families: target motions (200 ms, lead velocity)", ("target", "replan_hz")),
-    "replan": ("replan: replan frequency (linear target)", ("replan_hz",)),
-    "rtc_grid": ("rtc_grid: inference delay d x execution horizon s (linear target)", ("d_steps", "s_steps")),
+    "replan": ("replan: replan frequency (linear target, 0.3 m/s, 200 ms, lead velocity)", ("replan_hz",)),
+    "rtc_grid": ("rtc_grid: inference delay d x execution horizon s (reversal target, 0.2 m/s, lead velocity)",
+                 ("d_steps", "s_steps")),
     "speed": ("speed: target speed (1 Hz)", ("speed_m_s",)),
     "latency": ("latency (1 Hz)", ("latency_ms",)),
     "bins": ("bins: quantization (static target)", ("bins",)),
@@ -238,10 +239,10 @@ def _verdict(pb: dict, pe: dict, a: str, b_word: str) -> tuple[str, str]:
 
 
 def compare(rows: list[dict], a: str = "hybrid", b: str | None = None, study: str | None = None,
-            where=None) -> list[dict]:
+            where=None, candidates: tuple[str, ...] | None = None) -> list[dict]:
     """Paired comparisons of mode ``a`` against mode ``b`` (None: the best other mode of each
-    condition), per condition (same study and every condition axis), matched by seed.
-    Differences are a minus b."""
+    condition, among ``candidates`` if given), per condition (same study and every condition axis), matched
+    by seed. Differences are a minus b."""
     out = []
     for ckey, by_mode in conditions(rows).items():
         if (study is not None and ckey[0] != study) or a not in by_mode:
@@ -249,7 +250,8 @@ def compare(rows: list[dict], a: str = "hybrid", b: str | None = None, study: st
         cond = dict(zip(COND_AXES, ckey[1:]), study=ckey[0])
         if where is not None and not where(cond):
             continue
-        others = [m for m in by_mode if m != a] if b is None else [m for m in (b,) if m in by_mode]
+        others = ([m for m in by_mode if m != a and (candidates is None or m in candidates)] if b is None
+                  else [m for m in (b,) if m in by_mode])
         if not others:
             continue
         other = best_mode(by_mode, others)
