@@ -35,7 +35,7 @@ PREFIX = {"lead": "lead ", "d_steps": "d=", "s_steps": "s=", "bins": "bins="}
 STUDIES = {
     "lead": ("lead: the expert aims where the target will be (velocity) or where it is (none); linear target, 1 Hz, 200 ms",
              ("lead", "speed_m_s")),
-    "families": ("families: target motions that change after the shot (200 ms; the expert leads with velocity)",
+    "families": ("families: target motions that change after the shot (200 ms; an expert source leads with velocity)",
                  ("target", "replan_hz")),
     "replan": ("replan: replan frequency (linear target, 0.3 m/s, 200 ms, lead velocity)", ("replan_hz",)),
     "rtc_grid": ("rtc_grid: inference delay d x execution horizon s (reversal target, 0.2 m/s, lead velocity)",
