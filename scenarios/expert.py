@@ -26,6 +26,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
+from scenarios.targets import reflect_into_box
 
 GRIPPER_OPEN_M = 0.08
 #: what the expert aims at (``ExpertConfig.lead``)
@@ -90,13 +91,6 @@ def lead_velocity_m_s(config: ExpertConfig, observation: Observation) -> np.ndar
     return vel
 
 
-def _reflect(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Reflect points into the box [low, high] (triangle wave per axis); points inside are unchanged."""
-    width = high - low
-    u = np.mod(x - low, 2.0 * width)
-    return low + np.where(u > width, 2.0 * width - u, u)
-
-
 def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.ndarray,
                    target_vel_m_s: np.ndarray | None = None) -> np.ndarray:
     """Float chunk ``(H, 7)``: min-jerk from ``ee_pos_m`` toward ``target_pos_m``, nominal orientation, open
@@ -114,7 +108,7 @@ def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.
                            float(np.linalg.norm(goal + vel * duration - start)) / config.approach_speed_m_s)
     goals = goal + times[:, None] * vel
     if np.any(vel) and config.workspace_low_m is not None:  # the target reflects at the walls: so does the lead
-        goals = _reflect(goals, np.asarray(config.workspace_low_m, dtype=float), np.asarray(config.workspace_high_m, dtype=float))
+        goals = reflect_into_box(goals, np.asarray(config.workspace_low_m, dtype=float), np.asarray(config.workspace_high_m, dtype=float))
     s = min_jerk(times / duration)[:, None]
     actions = np.zeros((config.horizon, 7))
     actions[:, :3] = start + s * (goals - start)

@@ -189,11 +189,15 @@ def _random_unit(rng: np.random.Generator) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _fold(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Reflect unbounded coordinates into [low, high] (triangle wave), elementwise."""
+def reflect_into_box(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Reflect unbounded coordinates into [low, high] (triangle wave), elementwise: where a point moving in a straight
+    line is once it bounces off the walls (points inside are unchanged)."""
     width = high - low
     u = np.mod(x - low, 2.0 * width)
     return low + np.where(u > width, 2.0 * width - u, u)
+
+
+_fold = reflect_into_box  # the name the motions (and their tests) use
 
 
 def _course_direction(rng: np.random.Generator, low: np.ndarray, high: np.ndarray) -> np.ndarray:

@@ -122,7 +122,8 @@ class ChunkExecutor(Protocol):
         ...
 
 
-_ZERO3 = np.zeros(3)
+#: a zero 3-vector the executors return for "no correction" (never written in place)
+ZERO3 = np.zeros(3)
 
 
 class ClockedExecutor:
@@ -166,7 +167,7 @@ class ClockedExecutor:
         return active.sample_positions(times_s)
 
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
-        return _ZERO3, _ZERO3
+        return ZERO3, ZERO3
 
     def offsets_many(self, times_s: np.ndarray, ref: ChunkReference) -> np.ndarray | None:
         return None

@@ -7,10 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.retarget import retarget_offset, retarget_offsets, trusted
-from mmact_ctrl.executors.base import ClockedExecutor, Layers
+from mmact_ctrl.executors.base import ZERO3, ClockedExecutor, Layers
 from mmact_ctrl.reference import ChunkReference
 
-_ZERO3 = np.zeros(3)
 
 
 class HybridExecutor(ClockedExecutor):
@@ -26,29 +25,30 @@ class HybridExecutor(ClockedExecutor):
 
     def __init__(self) -> None:
         super().__init__()
-        self._trust: tuple[int, tuple] = (0, (False, False))  # (id of the chunk reference, _aim of it)
+        # caches keyed by the reference object itself (held, so it cannot be confused with a later one)
+        self._trust: tuple[ChunkReference | None, tuple[bool, bool]] = (None, (False, False))  # (ref, _aim of it)
         self._last: ChunkReference | None = None  # the chunk executed before the active one
-        self._carry: tuple[int, np.ndarray] = (0, _ZERO3)  # (id of a leading chunk, the reference step it carries)
+        self._carry: tuple[ChunkReference | None, np.ndarray] = (None, ZERO3)  # (leading ref, the step it carries)
 
     def reset(self) -> None:
-        self._trust = (0, (False, False))
+        self._trust = (None, (False, False))
         self._last = None
-        self._carry = (0, _ZERO3)
+        self._carry = (None, ZERO3)
 
     def activate(self, ref: ChunkReference, t_s: float) -> None:
-        self._carry = (id(ref), self._carry_for(ref, t_s))
+        self._carry = (ref, self._carry_for(ref, t_s))
         self._last = ref
 
     def _carry_for(self, ref: ChunkReference, t_s: float) -> np.ndarray:
         """The step (3,) m from ``ref``'s raw position at ``t_s`` to the reference being executed then (the previous
         chunk with its correction): a leading chunk starts where that reference was and blends into its pull, so
         the hand-over does not jump (a resting chunk's rule is continuous by itself)."""
-        if self._carry[0] == id(ref):
+        if self._carry[0] is ref:
             return self._carry[1]
         prev = self._last
         ok, leading = self._aim(ref)
         if prev is None or prev is ref or not (ok and leading):
-            return _ZERO3
+            return ZERO3
         return prev.sample(t_s)[0][:3] + self.offset(t_s, prev)[0] - ref.sample(t_s)[0][:3]
 
     def _aim(self, ref: ChunkReference) -> tuple[bool, bool]:
@@ -57,24 +57,23 @@ class HybridExecutor(ClockedExecutor):
         its end (:attr:`ChunkReference.at_rest` false: it leads a moving target, or its approach is not over) aims at
         a moving point: it is trusted when some waypoint of it comes within the trust radius of the target estimate
         predicted to that waypoint's time."""
-        if self._trust[0] != id(ref):
+        if self._trust[0] is not ref:
             cfg = self.controller.config.retarget
             leading = not ref.at_rest
             ok = trusted(cfg, ref.aim_pos_m, ref.target_at_obs_m)
             if leading and ref.target_at_obs_m is not None and cfg.rule != "none" and self.controller.filter.initialized:
                 pred = self.controller.filter.predict_pos_many(ref.chunk.times_s)
                 ok = bool(np.min(np.linalg.norm(ref.chunk.waypoints[:, :3] - pred, axis=1)) <= cfg.trust_radius_m)
-            self._trust = (id(ref), (ok, leading))
+            self._trust = (ref, (ok, leading))
         return self._trust[1]
 
-    def _alpha(self, times_s, ref: ChunkReference):
-        """The pull's blend weight: 0 at activation, 1 ``pull_s`` later or at :meth:`_blend_end_s` if that is
-        earlier (and its rate, 1/s)."""
-        t0 = ref.t_active_s
-        t1 = min(self._blend_end_s(ref), t0 + self.pull_s) if self.pull_s > 0 else self._blend_end_s(ref)
-        span = max(t1 - t0, 1e-6)
-        alpha = np.clip((np.asarray(times_s, dtype=float) - t0) / span, 0.0, 1.0)
-        return alpha, np.where((alpha > 0) & (alpha < 1), 1.0 / span, 0.0)
+    def _pull_span_s(self, ref: ChunkReference) -> float:
+        """How long the pull's blend weight takes from 0 (activation) to 1: ``pull_s``, or up to
+        :meth:`_blend_end_s` if that is earlier, s."""
+        t1 = self._blend_end_s(ref)
+        if self.pull_s > 0:
+            t1 = min(t1, ref.t_active_s + self.pull_s)
+        return max(t1 - ref.t_active_s, 1e-6)
 
     def _blend_end_s(self, ref: ChunkReference) -> float:
         """The retargeting blend ends at the last waypoint of ``ref`` that will actually run: the next chunk is due
@@ -85,17 +84,19 @@ class HybridExecutor(ClockedExecutor):
         """A chunk at rest at its end: ``controllers.retarget.retarget_offset`` (the rule of ``config.retarget``).
         A moving (leading) chunk already follows the target's predicted course (walls included, when its source
         knows them), so only the difference between where it is and where the estimate says the target is, is
-        pulled in, blended over the replan period from the step ``c`` it carries over from the previous reference
+        pulled in, blended over :meth:`_pull_span_s` from the step ``c`` it carries over from the previous reference
         (:meth:`_carry_for`): ``(1 - alpha(t)) c + alpha(t) (p_hat(t) - w(t))``, whatever the rule but ``none``
         (adding the target's displacement as for a resting chunk would count its motion twice)."""
         est = self.controller.filter
         ok, leading = self._aim(ref)
         if not (est.initialized and ok):
-            return _ZERO3, _ZERO3
+            return ZERO3, ZERO3
         cfg = self.controller.config.retarget
         if leading:
-            (w, w_rate), (alpha, dalpha) = ref.sample(t_s), self._alpha(t_s, ref)
-            alpha, dalpha = float(alpha), float(dalpha)
+            w, w_rate = ref.sample(t_s)
+            span = self._pull_span_s(ref)
+            alpha = min(max((t_s - ref.t_active_s) / span, 0.0), 1.0)
+            dalpha = 1.0 / span if 0.0 < alpha < 1.0 else 0.0
             gap = est.predict_pos(t_s) - w[:3]
             carry = self._carry_for(ref, ref.t_active_s)
             return ((1.0 - alpha) * carry + alpha * gap,
@@ -110,7 +111,7 @@ class HybridExecutor(ClockedExecutor):
             return None
         pred = est.predict_pos_many(times_s)
         if leading:
-            alpha, _ = self._alpha(times_s, ref)
+            alpha = np.clip((np.asarray(times_s, dtype=float) - ref.t_active_s) / self._pull_span_s(ref), 0.0, 1.0)
             carry = self._carry_for(ref, ref.t_active_s)
             return (1.0 - alpha)[:, None] * carry + alpha[:, None] * (pred - ref.sample_positions(times_s))
         return retarget_offsets(self.controller.config.retarget, times_s, ref.aim_pos_m, ref.target_at_obs_m, pred,

@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mmact_ctrl.executors.base import ClockedExecutor, Layers
+from mmact_ctrl.executors.base import ZERO3, ClockedExecutor, Layers
 from mmact_ctrl.reference import ChunkReference
 
-_ZERO3 = np.zeros(3)
 
 
 class ResidualExecutor(ClockedExecutor):
@@ -38,8 +37,8 @@ class ResidualExecutor(ClockedExecutor):
         self.policy = policy
         self._meas: list[tuple[float, np.ndarray]] = []  # (t_capture_s, pos_m) of the measurements seen, oldest first
         self._base: ChunkReference | None = None  # the chunk the applied correction is relative to
-        self._from = _ZERO3  # the applied correction at the last update
-        self._to = _ZERO3  # ... and one update period later
+        self._from = ZERO3  # the applied correction at the last update
+        self._to = ZERO3  # ... and one update period later
         self._t_update_s = -1.0
         self._next_update_s = 0.0
         self._period_s = 0.01
@@ -57,8 +56,8 @@ class ResidualExecutor(ClockedExecutor):
     def reset(self) -> None:
         self._meas = []
         self._base = None
-        self._from = _ZERO3
-        self._to = _ZERO3
+        self._from = ZERO3
+        self._to = ZERO3
         self._t_update_s = -1.0
         self._next_update_s = 0.0
         self.updates = 0
@@ -73,7 +72,7 @@ class ResidualExecutor(ClockedExecutor):
     def _carry(self, t_s: float, ref: ChunkReference) -> np.ndarray:
         """The correction that keeps the reference where it is when ``ref`` replaces the current base chunk."""
         if self._base is None:
-            return _ZERO3
+            return ZERO3
         return self._base.sample(t_s)[0][:3] + self._hold(t_s)[0] - ref.sample(t_s)[0][:3]
 
     def perceive(self, t_capture_s: float, z_m: np.ndarray | None) -> None:
@@ -102,20 +101,20 @@ class ResidualExecutor(ClockedExecutor):
         meas = self._measurements()
         terms = self.controller.terms
         if meas is None or terms is None:
-            return _ZERO3
+            return ZERO3
         z, z_prev, gap_s = meas
         base = ref.sample(t_s)[0][:3]
         chunk = ref.chunk
         feats = residual_features(base, t_s - chunk.t0_s, chunk.horizon * chunk.dt_s, z, z_prev, gap_s,
                                   terms.pos_m, terms.vel[:3])
         corr = np.asarray(self.policy.correction_m(feats), dtype=float).reshape(3)
-        return corr if np.all(np.isfinite(corr)) else _ZERO3
+        return corr if np.all(np.isfinite(corr)) else ZERO3
 
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
         """The applied correction at ``t_s`` for the active chunk; for a candidate (the splice check), the correction
         it would start with (:meth:`_carry`)."""
         if ref is not self._base:
-            return self._carry(t_s, ref), _ZERO3
+            return self._carry(t_s, ref), ZERO3
         if t_s >= self._next_update_s - 1e-9:
             now = self._hold(t_s)[0]
             step = self._correction(t_s, ref) - now
@@ -131,7 +130,7 @@ class ResidualExecutor(ClockedExecutor):
     def _hold(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The first-order hold between the last update and the next: (correction m, its rate m/s)."""
         if self._t_update_s < 0:
-            return _ZERO3, _ZERO3
+            return ZERO3, ZERO3
         x = min(max((t_s - self._t_update_s) / self._period_s, 0.0), 1.0)
-        rate = (self._to - self._from) / self._period_s if x < 1.0 else _ZERO3
+        rate = (self._to - self._from) / self._period_s if x < 1.0 else ZERO3
         return self._from + x * (self._to - self._from), rate
