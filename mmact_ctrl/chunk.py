@@ -25,6 +25,9 @@ class Observation:
         target_prev_pos_m: where the target was in the frame ``frame_gap_s`` earlier (3,), m (a second frame, from
             which a source may estimate the target's velocity; at the start of an episode, the first frame).
         frame_gap_s: time between that earlier frame and this one, s (0 when there is no earlier frame yet).
+        prev_image: camera frame(s) ``(V, H, W, 3)`` uint8 rendered ``prev_frame_gap_s`` before ``t0_s``, for a
+            source that declares ``prev_frame_gap_s > 0`` (a policy that sees motion); None when the source does
+            not ask for it, or there was no earlier frame (the first query of an episode).
     """
 
     t0_s: float
@@ -38,6 +41,7 @@ class Observation:
     instruction: str = ""
     target_prev_pos_m: np.ndarray | None = None
     frame_gap_s: float = 0.0
+    prev_image: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from mmact_ctrl.chunk import ChunkSource, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.executors import QueryContext
+from mmact_ctrl.frame_history import EarlierFrame
 from mmact_ctrl.perception import OracleSensor, TargetSensor
 from mmact_ctrl.world import World
 
@@ -99,7 +100,8 @@ class CommandLink(Protocol):
 
 
 def observe(world: World, controller: HybridController, t_s: float, with_image: bool,
-            target_prev_pos_m: np.ndarray | None = None, frame_gap_s: float = 0.0) -> Observation:
+            target_prev_pos_m: np.ndarray | None = None, frame_gap_s: float = 0.0,
+            prev_image: np.ndarray | None = None) -> Observation:
     """What a chunk source sees at ``t_s``: robot state, the target in this frame (and, when given, in the frame
     ``frame_gap_s`` earlier), pixels if needed."""
     state = world.state()
@@ -116,6 +118,7 @@ def observe(world: World, controller: HybridController, t_s: float, with_image: 
         instruction=world.instruction,
         target_prev_pos_m=None if target_prev_pos_m is None else np.asarray(target_prev_pos_m, dtype=float).copy(),
         frame_gap_s=float(frame_gap_s),
+        prev_image=prev_image,
     )
 
 
@@ -190,6 +193,8 @@ def run_episode(
     if sensor is None:
         sensor = OracleSensor(world, cfg.perception_hz, 0.0, dt)
     sensor.reset(seed)
+    # a source that sees motion (two frames) gets the frame rendered prev_frame_gap_s before each query
+    earlier = EarlierFrame(world.render, float(getattr(source, "prev_frame_gap_s", 0.0) or 0.0), dt)
     missed_in_row = 0
     n_done = n
     wall0 = time.perf_counter()
@@ -211,12 +216,14 @@ def run_episode(
             log.measurements += 1
             log.measurements_lost += m.pos_m is None
         perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
+        earlier.tick(t, next_plan_s)
         if t >= next_plan_s - eps:
             if k >= gap_ticks:  # the frame FRAME_GAP_S earlier (the target positions recorded so far)
                 prev, gap_s = log.target_pos_m[k - gap_ticks], gap_ticks * dt
             else:  # no earlier frame yet: the first one
                 prev, gap_s = (log.target_pos_m[0], k * dt) if k > 0 else (None, 0.0)
-            obs = observe(world, controller, t, with_image=source.needs_image, target_prev_pos_m=prev, frame_gap_s=gap_s)
+            obs = observe(world, controller, t, with_image=source.needs_image, target_prev_pos_m=prev, frame_gap_s=gap_s,
+                          prev_image=earlier.take(t) if earlier.gap_s > 0 else None)
             scheduled = intake.pending[-1].chunk if intake.pending else (controller.active.chunk if controller.active else None)
             call = executor.request(source, obs, QueryContext(t_s=t, latency_s=latency_s, scheduled=scheduled))
             p0 = time.perf_counter()

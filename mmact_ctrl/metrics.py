@@ -130,6 +130,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
     return {
         "seed": int(log.seed),
         "instruction": log.instruction,
+        "target_start_pos_m": [float(x) for x in log.target_pos_m[0]] if len(log.target_pos_m) else [],
         "success": start is not None,
         "wrong_object": bool(wrong_object),
         "time_to_reach_s": float(start * dt) if start is not None else float("nan"),

@@ -44,6 +44,35 @@ class PolicyChunkSource:
         self.refine_bins = self.policy.default_refine_bins if refine_bins is None else int(refine_bins)
         self.action_steps = int(action_steps)
         self.checkpoint = path
+        offsets = list(self.policy.bundle.frame_offsets_s)
+        if len(offsets) > 2:
+            raise ValueError(f"policy checkpoint {str(path)!r} takes {len(offsets)} frames {offsets}; the loop provides "
+                             "the current frame and one earlier frame")
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """The cameras the checkpoint was trained on (the world must render these, in this order)."""
+        return tuple(self.policy.bundle.camera_names)
+
+    @property
+    def prev_frame_gap_s(self) -> float:
+        """How long before each query the earlier frame is taken (0: the checkpoint sees one frame)."""
+        offsets = self.policy.bundle.frame_offsets_s
+        return float(-offsets[1]) if len(offsets) > 1 else 0.0
+
+    def views(self, observation: Observation) -> np.ndarray:
+        """The frames of one query in the checkpoint's order: the current frame of each camera, then (two-frame
+        checkpoints) the earlier one; without an earlier frame (the first query) the current one stands in."""
+        if observation.image is None:
+            raise ValueError("the policy needs the camera frame: Observation.image is None")
+        img = np.asarray(observation.image)
+        if len(img) != len(self.camera_names):
+            raise ValueError(f"the policy was trained on cameras {list(self.camera_names)} but the observation has "
+                             f"{len(img)} view(s)")
+        if self.prev_frame_gap_s <= 0:
+            return img
+        prev = img if observation.prev_image is None else np.asarray(observation.prev_image)
+        return np.concatenate([img, prev])
 
     @property
     def chunk_dt_s(self) -> float:
@@ -59,9 +88,7 @@ class PolicyChunkSource:
         return ActionChunk(waypoints=actions, dt_s=self.chunk_dt_s, t0_s=observation.t0_s, tokens=tokens)
 
     def plan(self, observation: Observation) -> ActionChunk:
-        if observation.image is None:
-            raise ValueError("the policy needs the camera frame: Observation.image is None")
-        tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
+        tokens, actions = self.policy.predict_chunk(self.views(observation), observation.instruction, observation.q_rad,
                                                     action_steps=self.action_steps, refine_bins=self.refine_bins)
         return self._chunk(tokens, actions, observation)
 
@@ -74,7 +101,7 @@ class PolicyChunkSource:
             return self.plan(observation)
         known_tokens = np.full((self.policy.horizon, 7), -1, dtype=np.int64)
         known_tokens[:n] = self.policy.action_tokenizer.encode(known[:n])[0]
-        tokens, actions = self.policy.predict_chunk(observation.image, observation.instruction, observation.q_rad,
+        tokens, actions = self.policy.predict_chunk(self.views(observation), observation.instruction, observation.q_rad,
                                                     action_steps=self.action_steps, known_actions=known_tokens,
                                                     refine_bins=self.refine_bins)
         return self._chunk(tokens, actions, observation)

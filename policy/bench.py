@@ -6,7 +6,9 @@ Times (ms, batch 1, ``torch.no_grad``, greedy) of the model + decoding given tok
 (``mm2a_ms``, ``k_step_ms``, ``autoregressive_ms``: each ``median`` / ``p99``), the full
 ``predict_chunk`` including VQ-encoding the frames and tokenizing text and state
 (``predict_chunk_ms``, with the checkpoint's sub-bin refinement window ``refine_bins``; the same
-with bin centres: ``predict_chunk_bin_centres_ms``), and the one-pass latency as views grow (``views``). ``speedup`` =
+with bin centres: ``predict_chunk_bin_centres_ms``), and the one-pass latency as views grow (``views``). The headline
+figures use the checkpoint's own query: ``n_views`` = its cameras x frames (``camera_names``, ``frame_offsets_s``; 4
+for two cameras with an earlier frame each), whose ``sequence_length`` is reported. ``speedup`` =
 autoregressive median / one-pass median. Without a checkpoint (none given and
 ``DEFAULT_CHECKPOINT`` absent) a randomly initialised model of the default size is timed: the
 latency is the same, the actions are meaningless.
@@ -48,7 +50,8 @@ def run_bench(policy: MMActPolicy, repeats: int = 30, ar_repeats: int = 3, k: in
               seed: int = 0) -> dict:
     rng = np.random.default_rng(seed)
     s = policy.bundle.image_cfg.image_size_px
-    img = rng.integers(0, 256, size=(1, s, s, 3), dtype=np.uint8)
+    n_views = policy.bundle.n_views  # the checkpoint's own query: cameras x frames
+    img = rng.integers(0, 256, size=(n_views, s, s, 3), dtype=np.uint8)
     q = np.zeros(7)
     q[3], q[5] = -1.5, 1.5
     instr = "reach the red ball"
@@ -57,6 +60,8 @@ def run_bench(policy: MMActPolicy, repeats: int = 30, ar_repeats: int = 3, k: in
     res: dict = {
         "device": str(policy.device), "threads": torch.get_num_threads(), "platform": platform.processor() or platform.machine(),
         "n_params": m.n_params(), "sequence_length": lay.length, "chunk_tokens": int(len(lay.target_idx)),
+        "n_views": n_views, "camera_names": list(policy.bundle.camera_names),
+        "frame_offsets_s": list(policy.bundle.frame_offsets_s),
     }
     with torch.no_grad():
         res["mm2a_ms"] = _time(lambda: decode_parallel(m, toks, lay, 1), repeats)
@@ -100,7 +105,8 @@ def main(argv: list[str] | None = None) -> dict:
     res = run_bench(policy, a.repeats, a.ar_repeats, a.k, tuple(int(v) for v in a.views.split(",")))
     res["checkpoint"] = str(path) if path else None
     print(f"mm2a one pass: median {res['mm2a_ms']['median']:.1f} ms, p99 {res['mm2a_ms']['p99']:.1f} ms "
-          f"(L={res['sequence_length']}, {res['n_params'] / 1e6:.2f} M params)")
+          f"(L={res['sequence_length']}: {res['n_views']} views = cameras {res['camera_names']} x frames "
+          f"{res['frame_offsets_s']} s, {res['n_params'] / 1e6:.2f} M params)")
     print(f"k={a.k} re-masking: median {res['k_step_ms']['median']:.1f} ms")
     print(f"autoregressive ({res['chunk_tokens']} passes): median {res['autoregressive_ms']['median']:.1f} ms -> "
           f"speedup {res['speedup']:.1f}x")

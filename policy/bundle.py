@@ -42,6 +42,9 @@ class PolicyBundle:
     model: MMActModel | None = None
     camera_names: list[str] = field(default_factory=lambda: ["front"])
     info: dict[str, Any] = field(default_factory=dict)
+    #: capture times of the frames an mm2a query holds, relative to the observation (s, 0 first; e.g. [0, -0.1]):
+    #: the views are ordered frame-major, ``[cam0@0, cam1@0, cam0@-0.1, cam1@-0.1]``
+    frame_offsets_s: list[float] = field(default_factory=lambda: [0.0])
     _builder: LayoutBuilder | None = None
 
     # ---- construction ---------------------------------------------------
@@ -60,6 +63,15 @@ class PolicyBundle:
     @property
     def device(self) -> torch.device:
         return self.image_tokenizer.codebook.device
+
+    @property
+    def n_cameras(self) -> int:
+        return len(self.camera_names)
+
+    @property
+    def n_views(self) -> int:
+        """Views of an mm2a query: cameras x frames (t2i and mmu see the current frame of each camera only)."""
+        return len(self.camera_names) * len(self.frame_offsets_s)
 
     def to(self, device: str | torch.device) -> "PolicyBundle":
         self.image_tokenizer.to(device)
@@ -107,6 +119,7 @@ class PolicyBundle:
             "text_tokenizer_json": self.text_tokenizer.to_json(),
             "chunk_dt_s": float(self.chunk_dt_s),
             "camera_names": list(self.camera_names),
+            "frame_offsets_s": [float(x) for x in self.frame_offsets_s],
             "model_state": cpu_state(self.model) if self.model is not None else None,
             "image_tokenizer_state": cpu_state(self.image_tokenizer),
             "info": dict(info if info is not None else self.info),
@@ -137,7 +150,8 @@ class PolicyBundle:
         load_state_strict(img, p["image_tokenizer_state"], "image tokenizer", path)
         img.eval()
         b = cls(image_cfg, img, text_tok, action_tok, state_tok, float(p["chunk_dt_s"]),
-                camera_names=list(p.get("camera_names") or ["front"]), info=dict(p.get("info") or {}))
+                camera_names=list(p.get("camera_names") or ["front"]), info=dict(p.get("info") or {}),
+                frame_offsets_s=[float(x) for x in (p.get("frame_offsets_s") or [0.0])])
         if model_cfg is None or p["model_state"] is None:
             if require_model:
                 raise CheckpointError(f"{path} holds no model weights (a stage-0 image/text tokenizer checkpoint)")

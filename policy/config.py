@@ -162,3 +162,6 @@ class TrainConfig:
     eval_samples: int = 256
     seed: int = 0
     aux_batch_size: int = 0  # batch of the t2i and mmu tasks; 0 = batch_size (a cheaper fine-tune keeps them small)
+    # inpainting: a share known_prefix_prob of the mm2a samples gets its first U{0..max} waypoints as known tokens
+    known_prefix_max_waypoints: int = 0
+    known_prefix_prob: float = 0.0

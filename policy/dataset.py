@@ -1,9 +1,14 @@
 """Reads the dataset written by ``python -m scenarios.collect`` (format in the issue / README).
 
 A directory with ``meta.json`` and shards ``shard_XXXX.npz``; each shard holds N_i samples of
-``images (N,V,H,W,3) uint8``, ``future_images`` (same), ``q_rad (N,7)``, ``actions (N,16,7)``
+``images (N,V,H,W,3) uint8``, ``future_images (N,C,H,W,3)``, ``q_rad (N,7)``, ``actions (N,16,7)``
 (float, not quantized), ``instructions``, ``questions``, ``answers`` (str), ``target_index (N,)``,
 ``target_pos_m (N,3)``. Every problem is reported with the file and field it concerns.
+
+Views: ``C = len(camera_names)`` cameras and, when ``meta.json`` has ``frame_offsets_s`` (e.g. ``[0.0, -0.1]``: the
+frame of the observation and one 0.1 s earlier), ``V = C x len(frame_offsets_s)`` frames ordered frame-major
+(``[cam0@0, cam1@0, cam0@-0.1, cam1@-0.1]``); without it ``V = C`` (one frame). The future frame (``<|t2i|>``) is
+one per camera.
 """
 
 from __future__ import annotations
@@ -37,6 +42,11 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     missing = [k for k in META_KEYS if k not in meta]
     if missing:
         raise DatasetError(f"{meta_path}: missing keys {missing}")
+    offsets = meta.setdefault("frame_offsets_s", [0.0])
+    if (not isinstance(offsets, list) or not offsets or not all(isinstance(x, (int, float)) for x in offsets)
+            or offsets[0] != 0 or any(x >= 0 for x in offsets[1:])):
+        raise DatasetError(f"{meta_path}: frame_offsets_s must be a list starting with 0 followed by negative "
+                           f"offsets (s), got {offsets!r}")
     b = meta["action_bounds"]
     if len(b.get("low", [])) != 7 or len(b.get("high", [])) != 7:
         raise DatasetError(f"{meta_path}: action_bounds need 7 'low' and 7 'high' values")
@@ -61,7 +71,7 @@ def read_metas(paths: str | Path | list[str | Path]) -> dict[str, Any]:
         raise DatasetError("no dataset directory given")
     metas = [read_meta(p) for p in paths]
     for p, m in zip(paths[1:], metas[1:]):
-        for k in META_KEYS:
+        for k in (*META_KEYS, "frame_offsets_s"):
             if m[k] != metas[0][k]:
                 raise DatasetError(f"{p}: meta.json {k}={m[k]!r} differs from {paths[0]}'s {metas[0][k]!r}")
     meta = dict(metas[0])
@@ -93,9 +103,10 @@ def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
     except Exception as e:  # zip / pickle / truncation errors
         raise DatasetError(f"{shard}: unreadable shard: {type(e).__name__}: {e}") from None
     n = len(data["images"])
-    s, v, h = meta["image_size_px"], len(meta["camera_names"]), meta["chunk_horizon"]
+    s, c, h = meta["image_size_px"], len(meta["camera_names"]), meta["chunk_horizon"]
+    v = c * len(meta.get("frame_offsets_s", [0.0]))
     expect = {
-        "images": (n, v, s, s, 3), "future_images": (n, v, s, s, 3), "q_rad": (n, 7), "actions": (n, h, 7),
+        "images": (n, v, s, s, 3), "future_images": (n, c, s, s, 3), "q_rad": (n, 7), "actions": (n, h, 7),
         "instructions": (n,), "questions": (n,), "answers": (n,), "target_index": (n,), "target_pos_m": (n, 3),
     }
     for f, shape in expect.items():

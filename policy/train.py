@@ -2,6 +2,9 @@
 
     stage 0: the tokenizers: byte-level BPE on the instruction/question/answer strings and the
              VQ-VAE image quantizer on the frames (images and future images) -> no model weights.
+             With ``--init CKPT`` (new cameras or scenes for a trained policy): the checkpoint's text
+             tokenizer and model are kept and its VQ-VAE is fine-tuned on the new frames, so the codes keep
+             their meaning for the model (dead codes restart on the new content); stage 2 then continues it.
     stage 1: (``--init`` a stage-0 checkpoint) masked-token training of t2i + mmu, action loss off.
     stage 2: (``--init`` a stage-1 checkpoint) loss weights action 1.0, text 0.05, image 0.05.
 
@@ -17,6 +20,12 @@ Training is masked-token prediction (MaskGIT / LLaDA): per sample a mask ratio
 ``full_mask_prob_action`` of the samples has the whole chunk masked, the one-pass case),
 cross-entropy over the target modality's id range on the masked positions only.
 ``--resume`` continues from ``OUT/resume_stage{N}.pt`` (written every ``--save-every`` steps).
+
+Known prefixes (``--known-prefix-max W``, stage 2): a share ``--known-prefix-prob`` of the mm2a samples gets the
+first ``n ~ U{0..W}`` waypoints of its chunk as known (unmasked) action tokens and the rest fully masked; the known
+tokens are left out of the loss. That is the query ``--mode inpaint`` (real-time chunking) makes at run time
+(DiscreteRTC, arXiv 2604.25050; training-time RTC, arXiv 2512.05964); one-pass decoding of an unconditioned
+chunk stays the default query.
 """
 
 from __future__ import annotations
@@ -61,6 +70,7 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("img", "fut", "instr", "quest", "answer", "answer_str", "state",
                                                            "action", "actions_f", "target_pos_m", "source")}
     for k, shard, meta in tqdm(dataset_shards(data_path), desc="tokenizing shards", disable=not progress):
+        check_views(bundle, meta, shard)
         d = read_shard(shard, meta)
         parts["source"].append(np.full(len(d["q_rad"]), k, dtype=np.int16))
         parts["img"].append(bundle.image_codes(d["images"]).astype(np.int16))
@@ -76,10 +86,22 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
+def check_views(bundle: PolicyBundle, meta: dict[str, Any], where) -> None:
+    """The data's cameras and frame offsets must be the bundle's (the views' order is the token layout)."""
+    offsets = [float(x) for x in meta.get("frame_offsets_s", [0.0])]
+    if list(meta["camera_names"]) != list(bundle.camera_names) or not np.allclose(offsets, bundle.frame_offsets_s):
+        raise DatasetError(f"{where}: cameras {meta['camera_names']} / frame offsets {offsets} differ from the "
+                           f"checkpoint's {bundle.camera_names} / {bundle.frame_offsets_s}")
+
+
 def build_task_batch(bundle: PolicyBundle, data: dict[str, np.ndarray], task: str, idx: np.ndarray):
-    """(clean tokens (B, L), layout) for samples ``idx`` of ``task``, the target filled with the truth."""
+    """(clean tokens (B, L), layout) for samples ``idx`` of ``task``, the target filled with the truth.
+
+    mm2a sees every view (cameras x frames); t2i and mmu the current frame of each camera."""
     b = bundle.builder
     img = data["img"][idx].astype(np.int64)
+    if task != "mm2a":
+        img = img[:, : bundle.n_cameras]
     if task == "mm2a":
         return b.fill("mm2a", data["instr"][idx], img, data["state"][idx], data["action"][idx].reshape(len(idx), -1))
     if task == "t2i":
@@ -106,6 +128,23 @@ def mask_targets(tokens: np.ndarray, target_idx: np.ndarray, mask_id: int, rng: 
     return out, mask
 
 
+def known_prefix_mask(mask: np.ndarray, horizon: int, action_dim: int, rng: np.random.Generator, max_waypoints: int,
+                      prob: float) -> tuple[np.ndarray, np.ndarray]:
+    """Turn a share ``prob`` of the rows of an mm2a target mask ``(B, H*D)`` into inpainting queries: the first
+    ``n ~ U{0..max_waypoints}`` waypoints known (unmasked, no loss), the rest of the chunk masked.
+
+    Returns ``(mask, n_known (B,))``; rows not drawn keep their mask and ``n_known = 0``."""
+    bsz = len(mask)
+    n_known = np.zeros(bsz, dtype=np.int64)
+    if max_waypoints <= 0 or prob <= 0:
+        return mask, n_known
+    rows = rng.random(bsz) < prob
+    n_known[rows] = rng.integers(0, max_waypoints + 1, size=int(rows.sum()))
+    pos = np.arange(horizon * action_dim)[None] // action_dim  # waypoint of each target position
+    prefix_mask = pos >= n_known[:, None]
+    return np.where(rows[:, None], prefix_mask, mask), n_known
+
+
 def soft_bin_cross_entropy(logits: torch.Tensor, target: torch.Tensor, sigma_bins: float) -> torch.Tensor:
     """Cross-entropy against a Gaussian over neighbouring bins (std ``sigma_bins``) centred on ``target``."""
     k = torch.arange(logits.shape[-1], device=logits.device, dtype=torch.float32)
@@ -115,10 +154,17 @@ def soft_bin_cross_entropy(logits: torch.Tensor, target: torch.Tensor, sigma_bin
 
 
 def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_prob: float, device,
-              action_sigma_bins: float = 0.0) -> torch.Tensor:
+              action_sigma_bins: float = 0.0, known_prefix_max: int = 0, known_prefix_prob: float = 0.0) -> torch.Tensor:
     model = bundle.model
     clean, lay = build_task_batch(bundle, data, task, idx)
     masked, mask = mask_targets(clean, lay.target_idx, model.vocab.mask_id, rng, full_prob if task == "mm2a" else 0.0)
+    if task == "mm2a" and known_prefix_max > 0:
+        cfg = bundle.model_cfg
+        mask, _ = known_prefix_mask(mask, cfg.horizon, cfg.action_dim, rng, known_prefix_max, known_prefix_prob)
+        sub = clean[:, lay.target_idx].copy()
+        sub[mask] = model.vocab.mask_id
+        masked = clean.copy()
+        masked[:, lay.target_idx] = sub
     lo, _ = model.vocab.range_of(lay.target_modality)
     inp = torch.as_tensor(masked, device=device)
     tgt = torch.as_tensor(clean[:, lay.target_idx] - lo, device=device)
@@ -159,7 +205,7 @@ def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray,
             out = target_tokens(decode_parallel(model, torch.as_tensor(inp, device=dev), lay, t2i_steps), lay).cpu().numpy()
             truth = clean[:, lay.target_idx]
             acc["t2i"].append((out == truth).ravel())
-            cur = data["img"][j].astype(np.int64).reshape(len(j), -1) + model.vocab.image_offset
+            cur = data["img"][j][:, : bundle.n_cameras].astype(np.int64).reshape(len(j), -1) + model.vocab.image_offset
             acc["t2i_copy"].append((cur == truth).ravel())
         if "mmu" in tasks:
             clean, lay = build_task_batch(bundle, data, "mmu", j)
@@ -202,7 +248,8 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
         d = read_shard(shard, shard_meta)
         n_total += len(d["images"])
         corpus += list(d["instructions"]) + list(d["questions"]) + list(d["answers"])
-        f = np.concatenate([d["images"], d["future_images"]]).reshape(-1, *d["images"].shape[2:])
+        f = np.concatenate([d["images"].reshape(-1, *d["images"].shape[2:]),
+                            d["future_images"].reshape(-1, *d["future_images"].shape[2:])])
         if len(f) > args.max_frames_per_shard:
             f = f[np.sort(rng.choice(len(f), args.max_frames_per_shard, replace=False))]
         frames.append(f)
@@ -210,12 +257,20 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
     perm = np.random.default_rng(args.split_seed).permutation(len(frames))
     n_val = min(512, max(1, len(frames) // 20))
     val_frames, train_frames = frames[perm[:n_val]], frames[perm[n_val:]]
-    text_tok = TextTokenizer.train(corpus, vocab_size=args.text_vocab)
-    strides = tuple(int(s) for s in args.strides.split(","))
-    chans = tuple([32, 64, 96, 96][: len(strides)])
-    icfg = ImageTokenizerConfig(image_size_px=int(meta["image_size_px"]), strides=strides, channels=chans,
-                                codebook_size=args.codebook_size)
-    img_tok = ImageTokenizer(icfg)
+    init = PolicyBundle.load(args.init, "cpu", require_model=False) if args.init else None
+    if init is not None:  # fine-tune its image tokenizer; its text tokenizer (the model's text ids) stays
+        if init.image_cfg.image_size_px != int(meta["image_size_px"]):
+            raise SystemExit(f"--init {args.init}: its image tokenizer takes {init.image_cfg.image_size_px} px frames, "
+                             f"the data has {meta['image_size_px']} px")
+        text_tok, icfg, img_tok = init.text_tokenizer, init.image_cfg, init.image_tokenizer
+    else:
+        text_tok = TextTokenizer.train(corpus, vocab_size=args.text_vocab)
+        strides = tuple(int(s) for s in args.strides.split(","))
+        chans = tuple([32, 64, 96, 96][: len(strides)])
+        icfg = ImageTokenizerConfig(image_size_px=int(meta["image_size_px"]), strides=strides, channels=chans,
+                                    codebook_size=args.codebook_size)
+        img_tok = ImageTokenizer(icfg)
+    psnr_before = evaluate_psnr(img_tok, val_frames) if init is not None else None
     log: list = []
     stats = train_image_tokenizer(img_tok, train_frames, args.steps, args.batch_size or 32, args.lr or 1e-3,
                                   args.seed, device, not args.no_progress, log)
@@ -225,11 +280,21 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
     vocab = VocabLayout(text_size=text_tok.vocab_size, image_codebook_size=icfg.codebook_size, action_bins=int(meta["action_bins"]))
     b = meta["action_bounds"]
     action_tok = ActionTokenizer(int(meta["action_bins"]), ActionBounds(tuple(b["low"]), tuple(b["high"])), vocab.action_offset)
-    bundle = PolicyBundle(icfg, img_tok.cpu().eval(), text_tok, action_tok, make_state_tokenizer(vocab.action_bins, vocab.action_offset),
-                          float(meta["chunk_dt_s"]), camera_names=list(meta["camera_names"]))
+    state_tok = make_state_tokenizer(vocab.action_bins, vocab.action_offset)
+    if init is not None and init.model is not None:  # the model's own token ids (stage 2 checks them against the data)
+        action_tok, state_tok = init.action_tokenizer, init.state_tokenizer
+    bundle = PolicyBundle(icfg, img_tok.cpu().eval(), text_tok, action_tok, state_tok,
+                          float(meta["chunk_dt_s"]), camera_names=list(meta["camera_names"]),
+                          frame_offsets_s=[float(x) for x in meta.get("frame_offsets_s", [0.0])])
     figures = {"image_psnr_db_heldout": psnr, "image_code_usage_heldout": usage, "image_train_psnr_db_last": stats["psnr_db"],
                "text_vocab_size": text_tok.vocab_size, "frames_train": len(train_frames), "frames_heldout": len(val_frames),
                "grid": icfg.grid}
+    if init is not None and init.model is not None:  # the policy goes on with the fine-tuned codes
+        figures["image_psnr_db_heldout_before"] = psnr_before
+        bundle.attach_model(init.model_cfg, init.model)
+        bundle.info = {k: init.info[k] for k in ("train_config", "history", "stage", "command", "figures") if k in init.info}
+        return bundle, {"figures": figures, "n_samples": n_total, "text_size": init.model_cfg.text_size,
+                        "log_tail": log[-5:], "init": str(args.init), "history": list(init.info.get("history", []))}
     return bundle, {"figures": figures, "n_samples": n_total, "text_size": text_tok.vocab_size, "log_tail": log[-5:]}
 
 
@@ -307,8 +372,19 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
                          weight_decay=0.01 if args.weight_decay is None else args.weight_decay,
                          warmup_steps=min(200, max(1, (args.steps or 2000) // 10)), weights=w, seed=args.seed,
                          eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins,
-                         aux_batch_size=args.aux_batch_size or 0)
+                         aux_batch_size=args.aux_batch_size or 0, known_prefix_max_waypoints=args.known_prefix_max,
+                         known_prefix_prob=args.known_prefix_prob)
+        new_views = (list(meta["camera_names"]), [float(x) for x in meta.get("frame_offsets_s", [0.0])])
+        if (list(bundle.camera_names), list(bundle.frame_offsets_s)) != new_views:
+            # a checkpoint trained on other views (e.g. one camera, one frame) fine-tuned on this data: its
+            # layout becomes the data's (the view embeddings of the new views start from their initial values)
+            print(f"views: {bundle.camera_names} x {bundle.frame_offsets_s} -> {new_views[0]} x {new_views[1]}",
+                  file=sys.stderr)
+            bundle.camera_names, bundle.frame_offsets_s = new_views
     check_data_matches(bundle, meta, args.init or resume_path)
+    if tc.known_prefix_max_waypoints >= bundle.model_cfg.horizon:
+        raise SystemExit(f"--known-prefix-max {tc.known_prefix_max_waypoints} must be below the chunk horizon "
+                         f"{bundle.model_cfg.horizon} (the issue's recipe: H/2)")
     torch.manual_seed(tc.seed)
     rng = np.random.default_rng(tc.seed)
     bundle.to(device)
@@ -358,7 +434,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
                 idx = rng.choice(train_idx, size=bs, replace=True, p=draw_p)
             with torch.autocast(amp_device, dtype=torch.bfloat16, enabled=use_amp):
                 loss = task_loss(bundle, data, task, idx, rng, tc.full_mask_prob_action, device,
-                                 tc.action_label_sigma_bins)
+                                 tc.action_label_sigma_bins, tc.known_prefix_max_waypoints, tc.known_prefix_prob)
             total = total + getattr(tc.weights, TASK_WEIGHT[task]) * loss
             losses[task] = float(loss.detach())
         opt.zero_grad(set_to_none=True)
@@ -391,8 +467,9 @@ def check_data_matches(bundle: PolicyBundle, meta: dict[str, Any], src) -> None:
     if at.bins != int(meta["action_bins"]) or not np.allclose(at.bounds.low, b["low"]) or not np.allclose(at.bounds.high, b["high"]):
         raise CheckpointError(f"{src}: its action tokenizer (bins {at.bins}, bounds {at.bounds}) does not match the "
                               f"dataset's meta.json (bins {meta['action_bins']}, bounds {b})")
-    if bundle.model_cfg and len(meta["camera_names"]) > bundle.model_cfg.max_views:
-        raise CheckpointError(f"{src}: dataset has {len(meta['camera_names'])} views > max_views {bundle.model_cfg.max_views}")
+    n_views = len(meta["camera_names"]) * len(meta.get("frame_offsets_s", [0.0]))
+    if bundle.model_cfg and n_views > bundle.model_cfg.max_views:
+        raise CheckpointError(f"{src}: dataset has {n_views} views (cameras x frames) > max_views {bundle.model_cfg.max_views}")
     if bundle.model_cfg and int(meta["chunk_horizon"]) != bundle.model_cfg.horizon:
         raise CheckpointError(f"{src}: model horizon {bundle.model_cfg.horizon} != dataset chunk_horizon {meta['chunk_horizon']}")
 
@@ -464,6 +541,12 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--w-image", type=float, default=None)
     ap.add_argument("--action-sigma-bins", type=float, default=16.0,
                     help="std (bins) of the Gaussian soft action targets (HL-Gauss); 0 = plain one-hot cross-entropy")
+    ap.add_argument("--known-prefix-max", type=int, default=0, metavar="W",
+                    help="stage 2: train for inpainting: a share --known-prefix-prob of the mm2a samples gets its first "
+                         "U{0..W} waypoints as known tokens, left out of the loss (the published RTC query; W = H/2 = 8 "
+                         "in the issue's recipe; default 0 = off)")
+    ap.add_argument("--known-prefix-prob", type=float, default=0.5,
+                    help="share of the mm2a samples that get a known prefix when --known-prefix-max > 0 (default 0.5)")
     ap.add_argument("--dropout", type=float, default=None,
                     help="dropout inside the transformer during this run (default: the model's own, 0)")
     ap.add_argument("--weight-decay", type=float, default=None, help="AdamW weight decay (default 0.01)")
@@ -480,6 +563,10 @@ def main(argv: list[str] | None = None) -> Path:
                     help="torch CPU threads (on a shared, busy CPU 1 thread is often much faster than oversubscribing)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
+    if args.known_prefix_max < 0:
+        ap.error(f"--known-prefix-max must be >= 0, got {args.known_prefix_max}")
+    if not 0.0 <= args.known_prefix_prob <= 1.0:
+        ap.error(f"--known-prefix-prob must be in [0, 1], got {args.known_prefix_prob}")
     if args.aux_batch_size is not None and args.aux_batch_size < 1:
         ap.error(f"--aux-batch-size must be >= 1, got {args.aux_batch_size}")
     if args.threads:
@@ -501,7 +588,10 @@ def main(argv: list[str] | None = None) -> Path:
         args.steps = args.steps or 1500
         bundle, info = run_stage0(args, meta, args.device)
         info["wall_s"] = time.perf_counter() - t0
-        history: list = []
+        history = list(info.pop("history", []))
+        if info.get("init") and bundle.info.get("stage") is not None:  # the policy whose tokenizer was refreshed
+            history.append({"stage": bundle.info.get("stage"), "command": bundle.info.get("command"),
+                            "figures": bundle.info.get("figures", {})})
     else:
         bundle, info = run_stage12(args, meta, args.device, out)
         args.steps = info["train_config"]["steps"]
@@ -511,6 +601,9 @@ def main(argv: list[str] | None = None) -> Path:
             history.append({"stage": prev.get("stage"), "command": prev.get("command"), "figures": prev.get("figures", {})})
         info["text_size"] = bundle.model_cfg.text_size
     info.update({"stage": args.stage, "command": command, "history": history, "data": " ".join(args.data), "seed": args.seed})
+    collect_cfg = meta.get("collect_config") or {}
+    if "plane_z_m" in collect_cfg:  # the scenes it was trained on (the evaluation builds the same ones)
+        info["scene"] = {"plane_z_m": float(collect_cfg["plane_z_m"])}
     bundle.info = info
     bundle.save(ckpt, info)
     write_model_card(out / "MODEL_CARD.md", ckpt, args, meta, info, history)

@@ -13,6 +13,15 @@ uint8``, ``future_images``, ``q_rad (N,7)``, ``actions (N,16,7)``, ``instruction
 ``answers`` (unicode strings), ``target_index (N,)``, ``target_pos_m (N,3)``), which numpy or any
 npz reader opens.
 
+Seeing in 3-D and seeing motion (issue 14): ``--plane-z-m 0`` puts the balls anywhere in the workspace box,
+``--cameras front side`` renders two views (so a ball's depth and height are both in the frames), ``--frame-gap-s 0.1``
+adds each camera's frame 0.1 s before the sample (``images`` then holds ``[cam0@t, cam1@t, cam0@t-0.1, cam1@t-0.1]``,
+``meta.json`` says ``frame_offsets_s: [0, -0.1]``; the first sample of an episode, which has no earlier frame, repeats
+the current one), ``--motion all`` mixes static and moving balls (linear, reversal, swerve, random_walk, jump), and
+``--expert-lead velocity`` labels each chunk with the leading expert (where the two frames say the ball will be at
+each waypoint's time, reflected at the workspace walls; ``scenarios.expert``). ``--holdout-box-m X0 X1 Y0 Y1``
+leaves out every scene whose instructed ball starts in that region of the table (for measuring generalization).
+
 DAgger-style relabelling (``--driver-checkpoint PATH --driver-prob P``): each chunk that *drives* the arm comes
 from that trained policy with probability P (from the expert otherwise), while every recorded label is still
 the expert's chunk for the recorded frame. The data then covers the states the policy itself visits, e.g. the
@@ -36,9 +45,27 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import observe
 from policy.action_tokenizer import ActionBounds
-from scenarios.expert import ExpertConfig, ScriptedExpert, expert_actions
+from scenarios.expert import LEADS, ExpertConfig, ScriptedExpert, expert_actions, lead_velocity_m_s
 from scenarios.panda_scene import TARGET_COLORS
 from scenarios.factory import make_world
+
+#: single motions a collection may use, and the mixes.
+MOTIONS: tuple[str, ...] = ("static", "linear", "reversal", "swerve", "random_walk", "jump")
+MOTION_CHOICES: tuple[str, ...] = (*MOTIONS, "mixed", "all")
+
+
+def draw_motion(motion: str, rng: np.random.Generator) -> str:
+    """The motion kind of one episode."""
+    if motion == "mixed":
+        return "linear" if rng.random() < 1 / 3 else "static"
+    if motion == "all":
+        return "static" if rng.random() < 1 / 3 else str(rng.choice(MOTIONS[1:]))
+    return motion
+
+
+def in_box(pos_m: np.ndarray, box_m: tuple[float, ...]) -> bool:
+    """Whether ``pos_m``'s x, y lie in ``box_m = (x0, x1, y0, y1)``."""
+    return bool(box_m) and box_m[0] <= pos_m[0] <= box_m[1] and box_m[2] <= pos_m[1] <= box_m[3]
 
 
 @dataclass(frozen=True)
@@ -46,7 +73,8 @@ class CollectConfig:
     """Attributes:
     episodes: number of episodes.
     objects: 1, 2, or 0 for a random mix (one third single-object).
-    motion: target motion: "static", "linear" or "mixed" (two thirds static, one third linear).
+    motion: target motion: one of ``MOTIONS`` (a ``scenarios.targets`` kind), "mixed" (two thirds static, one third
+        linear) or "all" (one third static, the rest evenly linear, reversal, swerve, random_walk, jump).
     speed_m_s: speed of moving targets.
     duration_s: episode length.
     sample_every_s: spacing of recorded samples.
@@ -57,6 +85,10 @@ class CollectConfig:
     seed: seed of episode 0 (episode i uses seed + i).
     plane_z_m: > 0: every object at this height (+ up to 2 cm), moving horizontally, so one camera
         frame determines its position; 0: the full 3-D workspace.
+    frame_gap_s: > 0: each sample also holds the frames this long before it (a policy that sees motion); 0: one frame.
+    expert_lead: the expert that labels the chunks: "none" (aim where the ball is) or "velocity" (where the two
+        frames ``frame_gap_s`` apart say it will be at each waypoint's time).
+    holdout_box_m: ``(x0, x1, y0, y1)`` m: scenes whose instructed ball starts inside are skipped (redrawn); () = none.
     """
 
     episodes: int = 1000
@@ -73,14 +105,26 @@ class CollectConfig:
     plane_z_m: float = 0.0
     driver_checkpoint: str = ""
     driver_prob: float = 0.0
+    frame_gap_s: float = 0.0
+    expert_lead: str = "none"
+    holdout_box_m: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.objects not in (0, 1, 2):
             raise ValueError(f"objects must be 1, 2 or 0 (mix), got {self.objects}")
-        if self.motion not in ("static", "linear", "mixed"):
-            raise ValueError(f"motion must be static, linear or mixed, got {self.motion!r}")
+        if self.motion not in MOTION_CHOICES:
+            raise ValueError(f"motion must be one of {MOTION_CHOICES}, got {self.motion!r}")
+        if not (np.isfinite(self.frame_gap_s) and 0.0 <= self.frame_gap_s < self.sample_every_s):
+            raise ValueError(f"frame_gap_s must be in [0, sample_every_s), got {self.frame_gap_s}")
+        if self.expert_lead not in LEADS:
+            raise ValueError(f"expert_lead must be one of {LEADS}, got {self.expert_lead!r}")
+        if self.expert_lead != "none" and self.frame_gap_s <= 0:
+            raise ValueError("expert_lead 'velocity' needs frame_gap_s > 0 (the two frames the lead is estimated from)")
+        if self.holdout_box_m and (len(self.holdout_box_m) != 4 or not self.holdout_box_m[0] < self.holdout_box_m[1]
+                                   or not self.holdout_box_m[2] < self.holdout_box_m[3]):
+            raise ValueError(f"holdout_box_m must be (x0, x1, y0, y1) with x0 < x1 and y0 < y1, got {self.holdout_box_m}")
         if not (0 < self.sample_every_s < self.duration_s):
             raise ValueError(f"sample_every_s must be in (0, duration_s), got {self.sample_every_s}")
         if not self.future_dt_s > 0:
@@ -113,13 +157,19 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
     seed = cfg.seed + index
     rng = np.random.default_rng([seed, 7])
     n_objects = cfg.objects or (1 if rng.random() < 1 / 3 else 2)
-    kind = cfg.motion if cfg.motion != "mixed" else ("linear" if rng.random() < 1 / 3 else "static")
+    kind = draw_motion(cfg.motion, rng)
     key = (n_objects, kind)
     if key not in world_cache:
         world_cache[key] = make_world(kind, cfg.speed_m_s, n_objects=n_objects, plane_z_m=cfg.plane_z_m,
                                       image_size_px=cfg.image_size_px, cameras=cfg.cameras)
     world = world_cache[key]
     world.reset(seed)
+    attempt = 0
+    while in_box(world.target_pos_m(), cfg.holdout_box_m):  # a held-out region: draw another scene
+        attempt += 1
+        if attempt > 1000:
+            raise RuntimeError(f"holdout_box_m {cfg.holdout_box_m} covers every scene of seed {seed}")
+        world.reset(seed + 10_000_000 * attempt)
     # random start: perturb the home pose (the world's own reset puts the arm at home)
     lim = JointLimits().arrays()
     q0 = np.clip(np.asarray(HOME_Q_RAD) + rng.normal(0.0, cfg.start_noise_rad, 7), lim["q_min_rad"] + 0.1, lim["q_max_rad"] - 0.1)
@@ -131,7 +181,8 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
         world_cache["controller"] = HybridController(stack)
     controller = world_cache["controller"]
     controller.reset(world.state().q_rad)
-    expert_cfg = ExpertConfig()
+    box = dict(workspace_low_m=tuple(world.target.workspace_low_m), workspace_high_m=tuple(world.target.workspace_high_m))
+    expert_cfg = ExpertConfig(lead=cfg.expert_lead, **box)
     source = ScriptedExpert(expert_cfg)
     driver = None
     if cfg.driver_prob > 0:
@@ -144,14 +195,21 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
     n = int(round((cfg.duration_s + cfg.future_dt_s) / dt))
     every = int(round(cfg.sample_every_s / dt))
     future = int(round(cfg.future_dt_s / dt))
+    gap = int(round(cfg.frame_gap_s / dt))
     frames: dict[int, np.ndarray] = {}
+    target_at: dict[int, np.ndarray] = {}  # the instructed ball where an earlier frame was taken
     samples: dict[str, list] = {k: [] for k in ("images", "future_images", "q_rad", "actions", "instructions",
                                                 "questions", "answers", "target_index", "target_pos_m")}
     pending = []
     for k in range(n + 1):
         t = k * dt
+        if gap and (k + gap) % every == 0 and (k + gap) * dt < cfg.duration_s - 1e-9:  # an earlier frame
+            frames[k], target_at[k] = world.render(), world.target_pos_m().copy()
         if k % every == 0 and k * dt < cfg.duration_s - 1e-9:
-            obs = observe(world, controller, t, with_image=True)
+            early = gap and k >= gap
+            obs = observe(world, controller, t, with_image=True,
+                          target_prev_pos_m=target_at[k - gap] if early else None, frame_gap_s=gap * dt if early else 0.0,
+                          prev_image=frames[k - gap] if early else None)
             frames[k] = obs.image
             q, a = question_answer(rng, world.objects_pos_m(), world.target_index)
             pending.append((k, obs, q, a))
@@ -167,10 +225,14 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
         out = controller.tick(t, state.q_rad, state.dq_rad_s)
         world.step(out.tau_nm, out.gripper_m)
     for k, obs, q, a in pending:
-        samples["images"].append(frames[k])
+        if gap:  # [current views, earlier views]; the first sample has no earlier frame: it repeats the current one
+            samples["images"].append(np.concatenate([frames[k], frames[k - gap] if k >= gap else frames[k]]))
+        else:
+            samples["images"].append(frames[k])
         samples["future_images"].append(frames[k + future])
         samples["q_rad"].append(obs.q_rad.astype(np.float32))
-        samples["actions"].append(expert_actions(expert_cfg, obs.ee_pos_m, obs.target_pos_m).astype(np.float32))
+        vel = lead_velocity_m_s(expert_cfg, obs)
+        samples["actions"].append(expert_actions(expert_cfg, obs.ee_pos_m, obs.target_pos_m, vel).astype(np.float32))
         samples["instructions"].append(obs.instruction)
         samples["questions"].append(q)
         samples["answers"].append(a)
@@ -240,6 +302,7 @@ def collect(cfg: CollectConfig, out: Path, workers: int = 1, episodes_per_shard:
         "action_bounds": {"low": list(bounds.low), "high": list(bounds.high)},
         "action_bins": 2048,
         "future_dt_s": cfg.future_dt_s,
+        "frame_offsets_s": [0.0, -cfg.frame_gap_s] if cfg.frame_gap_s > 0 else [0.0],
         "n_samples": total,
         "collect_config": asdict(cfg),
         "command": " ".join(["python -m scenarios.collect", *sys.argv[1:]]),
@@ -254,7 +317,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=1000, help="number of episodes")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--objects", type=int, default=0, choices=(0, 1, 2), help="objects per scene (0: random mix of 1 and 2)")
-    p.add_argument("--motion", default="mixed", choices=("static", "linear", "mixed"), help="target motion")
+    p.add_argument("--motion", default="mixed", choices=MOTION_CHOICES,
+                   help="target motion: one kind, mixed (2/3 static, 1/3 linear) or all (1/3 static, the rest evenly "
+                        "linear, reversal, swerve, random_walk, jump)")
+    p.add_argument("--frame-gap-s", type=float, default=0.0,
+                   help="> 0: each sample also holds every camera's frame this long earlier (motion); 0: one frame")
+    p.add_argument("--expert-lead", default="none", choices=LEADS,
+                   help="labels: none = aim where the ball is in the frame; velocity = where the two frames say it "
+                        "will be at each waypoint's time (needs --frame-gap-s > 0)")
+    p.add_argument("--holdout-box-m", type=float, nargs=4, default=None, metavar=("X0", "X1", "Y0", "Y1"),
+                   help="skip scenes whose instructed ball starts in this region of the table (m), to measure "
+                        "generalization on it")
     p.add_argument("--speed", type=float, default=0.2, help="speed of moving targets (m/s)")
     p.add_argument("--image-size-px", type=int, default=96, help="camera resolution")
     p.add_argument("--cameras", nargs="+", default=["front"], help="camera names")
@@ -273,7 +346,9 @@ def main(argv: list[str] | None = None) -> int:
         cfg = CollectConfig(episodes=args.episodes, objects=args.objects, motion=args.motion, speed_m_s=args.speed,
                             image_size_px=args.image_size_px, cameras=tuple(args.cameras), seed=args.seed,
                             duration_s=args.duration_s, plane_z_m=args.plane_z_m,
-                            driver_checkpoint=args.driver_checkpoint, driver_prob=args.driver_prob)
+                            driver_checkpoint=args.driver_checkpoint, driver_prob=args.driver_prob,
+                            frame_gap_s=args.frame_gap_s, expert_lead=args.expert_lead,
+                            holdout_box_m=tuple(args.holdout_box_m or ()))
     except ValueError as exc:
         p.error(str(exc))
     n = collect(cfg, Path(args.out), workers=args.workers)

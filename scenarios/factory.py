@@ -18,6 +18,21 @@ from scenarios.targets import target_spec
 POLICY_PLANE_Z_M = 0.1
 
 
+def policy_scene_plane_z_m(checkpoint_info: dict) -> float:
+    """The ball height (m) of a policy checkpoint's training scenes: what ``scenarios.collect --plane-z-m`` it was
+    trained on (recorded by ``policy.train`` as ``info["scene"]``; 0 = the full 3-D workspace); a checkpoint that
+    does not record it (the shipped planar one) gets ``POLICY_PLANE_Z_M``."""
+    scene = checkpoint_info.get("scene") or {}
+    return float(scene.get("plane_z_m", POLICY_PLANE_Z_M))
+
+
+def policy_scene(source) -> dict:
+    """``make_world`` settings of a learned policy's evaluation scenes: two balls, the checkpoint's cameras and
+    its training plane (``policy_scene_plane_z_m``)."""
+    return dict(n_objects=2, plane_z_m=policy_scene_plane_z_m(source.policy.bundle.info),
+                cameras=tuple(source.camera_names))
+
+
 def make_world(target: str = "linear", speed_m_s: float = 0.2, noise_m: float = 0.002, dropout: float = 0.1,
                n_objects: int = 1, plane_z_m: float = 0.0, instruction: str | None = None,
                image_size_px: int = 96, cameras: tuple[str, ...] = ("front",)) -> SimWorld:

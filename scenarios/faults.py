@@ -132,12 +132,12 @@ _CACHE: dict = {}
 
 
 def _world(source: str, target: str, speed: float):
-    from scenarios.factory import POLICY_PLANE_Z_M, make_world
+    from scenarios.factory import make_world, policy_scene
 
     key = ("world", source, target, speed)
     if key not in _CACHE:
-        extra = dict(plane_z_m=POLICY_PLANE_Z_M) if source == "policy" else {}
-        _CACHE[key] = make_world(target, speed, n_objects=2, **extra)
+        extra = policy_scene(_source("policy")) if source == "policy" else {"n_objects": 2}
+        _CACHE[key] = make_world(target, speed, **extra)
     return _CACHE[key]
 
 

@@ -27,7 +27,7 @@ from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
 from scenarios.targets import KINDS as TARGET_KINDS
 from scenarios.expert import LEADS
-from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
+from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world, policy_scene
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
@@ -147,7 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
     w.add_argument("--plane-z-m", type=_plane, default="auto",
                    help="objects at this height (+ up to 2 cm) moving horizontally, as in the policy's training scenes; "
-                        f"0 = the full 3-D workspace; auto = {POLICY_PLANE_Z_M} with --source policy, 0 with --source expert")
+                        f"0 = the full 3-D workspace; auto = the checkpoint's training plane with --source policy ({POLICY_PLANE_Z_M} "
+                        "for the shipped one), 0 with --source expert")
     w.add_argument("--objects", type=int, choices=(1, 2), default=2,
                    help="objects in the scene (two differently coloured balls: the instruction names one)")
     w.add_argument("--instruction", metavar="TEXT", default=None,
@@ -243,10 +244,17 @@ def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
-    plane_z_m = (POLICY_PLANE_Z_M if args.source == "policy" else 0.0) if args.plane_z_m == "auto" else args.plane_z_m
-    world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
-                       plane_z_m=plane_z_m, instruction=args.instruction)
-    source = make_source(args, world)
+    if args.source == "policy":  # the policy's scenes: its cameras, its training plane
+        source = make_source(args)
+        scene = policy_scene(source)
+        plane_z_m = scene["plane_z_m"] if args.plane_z_m == "auto" else args.plane_z_m
+        world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
+                           plane_z_m=plane_z_m, instruction=args.instruction, cameras=scene["cameras"])
+    else:
+        plane_z_m = 0.0 if args.plane_z_m == "auto" else args.plane_z_m
+        world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
+                           plane_z_m=plane_z_m, instruction=args.instruction)
+        source = make_source(args, world)
     try:
         sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
     except ValueError:

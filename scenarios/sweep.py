@@ -160,18 +160,18 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
     from mmact_ctrl.metrics import episode_metrics
-    from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
+    from scenarios.factory import make_expert, make_world, policy_scene
 
     source_name = cell.get("source", "expert")
-    wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
-    if wkey not in _CACHE:  # the policy's scenes: two balls at one height (as in scenarios.collect)
-        policy_scene = dict(n_objects=2, plane_z_m=POLICY_PLANE_Z_M) if source_name == "policy" else {}
-        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **policy_scene)
-    if source_name == "policy":
-        if "policy" not in _CACHE:
-            from mmact_ctrl.policy_source import PolicyChunkSource
+    if source_name == "policy" and "policy" not in _CACHE:
+        from mmact_ctrl.policy_source import PolicyChunkSource
 
-            _CACHE["policy"] = PolicyChunkSource(cell.get("checkpoint") or None)
+        _CACHE["policy"] = PolicyChunkSource(cell.get("checkpoint") or None)
+    wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
+    if wkey not in _CACHE:  # the policy's scenes: two balls, its cameras and training plane (as in scenarios.collect)
+        scene = policy_scene(_CACHE["policy"]) if source_name == "policy" else {}
+        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **scene)
+    if source_name == "policy":
         source = _CACHE["policy"]
     else:
         source = make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=_CACHE[wkey])
@@ -196,6 +196,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)
     m.pop("plan_ms", None)  # per-chunk list; the row keeps plan_ms_median
+    m.pop("target_start_pos_m", None)  # a vector; the cell's seed fixes it
     return {**cell, "duration_s": duration_s, **{k: v for k, v in m.items() if k != "seed"}}
 
 

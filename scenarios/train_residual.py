@@ -148,12 +148,8 @@ def _recording_sensor(world, rate_hz: float, dt_s: float):
 
 def _parts(spec: EpisodeSpec):
     from controllers.robot_model import PandaModel
-    from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world
+    from scenarios.factory import make_expert, make_world, policy_scene
 
-    wkey = ("world", spec.source, spec.kind, spec.speed_m_s)
-    if wkey not in _CACHE:
-        scene = dict(n_objects=2, plane_z_m=POLICY_PLANE_Z_M) if spec.source == "policy" else {}
-        _CACHE[wkey] = make_world(target=spec.kind, speed_m_s=spec.speed_m_s, **scene)
     skey = ("source", spec.source, spec.lead)
     if skey not in _CACHE:
         if spec.source == "policy":
@@ -162,6 +158,10 @@ def _parts(spec: EpisodeSpec):
             _CACHE[skey] = PolicyChunkSource()
         else:
             _CACHE[skey] = make_expert(bins=2048, **({"lead": spec.lead} if spec.lead else {}))
+    wkey = ("world", spec.source, spec.kind, spec.speed_m_s)
+    if wkey not in _CACHE:
+        scene = policy_scene(_CACHE[skey]) if spec.source == "policy" else {}
+        _CACHE[wkey] = make_world(target=spec.kind, speed_m_s=spec.speed_m_s, **scene)
     if "model" not in _CACHE:
         _CACHE["model"] = PandaModel()
     return _CACHE[wkey], _CACHE[skey], _CACHE["model"]
