@@ -173,7 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="camera perception: the scene camera(s) that measure the ball (front, top, side)")
     w.add_argument("--filter", choices=FILTER_MODELS, default="cv",
                    help="target model of the Kalman filter: cv constant velocity, ca constant acceleration, imm an "
-                        "interacting multiple model of both (follows curving and accelerating targets)")
+                        "interacting multiple model of both (follows curving and accelerating targets), ct a "
+                        "coordinated turn (constant speed and turn rate about the vertical), imm-ct an interacting "
+                        "multiple model of cv, ca and ct (predicts along a circle: the best for curving targets)")
     w.add_argument("--episodes", type=_number(int, "--episodes", 1), default=10, help="episodes per mode")
     w.add_argument("--duration-s", type=_number(float, "--duration-s", 0, False), default=6.0, help="episode length (s)")
     w.add_argument("--seed", type=_number(int, "--seed", 0), default=0, help="seed of the first episode (episode i uses seed+i)")

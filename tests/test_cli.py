@@ -27,6 +27,7 @@ BAD = [
     (["--refine-bins", "-3"], "--refine-bins"),
     (["--expert-lead", "psychic"], "--expert-lead"),
     (["--mode", "warp"], "--mode"),
+    (["--filter", "ct-imm"], "--filter"),
     (["--mode", "residual", "--residual-checkpoint", "/nonexistent/res.pt"], "residual"),
 ]
 

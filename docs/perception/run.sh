@@ -14,6 +14,9 @@ $mt --target linear --perception-latency-ms 100 --json $out/oracle_lat100.json >
 for f in cv imm; do
   $mt --target circle --speed 0.4 --filter $f --json $out/circle_$f.json > $out/circle_$f.txt
 done
+for s in 0 100; do  # the coordinated-turn IMM (circle_tracking.md)
+  $mt --target circle --speed 0.4 --filter imm-ct --seed $s --json $out/circle_imm-ct_s$s.json > $out/circle_imm-ct_s$s.txt
+done
 $mt --target linear --filter imm --json $out/linear_imm.json > $out/linear_imm.txt
 $mt --target jump --filter imm --json $out/jump_imm.json > $out/jump_imm.txt
 for lat in 0 100; do $mt --target linear --filter imm --perception-latency-ms $lat --json $out/oracle_imm_lat$lat.json > $out/oracle_imm_lat$lat.txt; done
