@@ -20,4 +20,6 @@ done
 $mt --target linear --filter imm --json $out/linear_imm.json > $out/linear_imm.txt
 $mt --target jump --filter imm --json $out/jump_imm.json > $out/jump_imm.txt
 for lat in 0 100; do $mt --target linear --filter imm --perception-latency-ms $lat --json $out/oracle_imm_lat$lat.json > $out/oracle_imm_lat$lat.txt; done
+for lat in 0 100; do $mt --target linear --filter imm-ct --perception-latency-ms $lat --json $out/oracle_immct_lat$lat.json > $out/oracle_immct_lat$lat.txt; done
+$mt --target jump --filter imm-ct --json $out/jump_imm-ct.json > $out/jump_imm-ct.txt
 echo PERCEPTION DONE
