@@ -31,6 +31,10 @@ def test_collect_writes_expert_labels_also_when_the_policy_drives(tmp_path):
         ({"driver_prob": 1.5, "driver_checkpoint": "x.pt"}, "driver_prob must be in"),
         ({"driver_prob": 0.5, "driver_checkpoint": "/nonexistent.pt"}, "does not exist"),
         ({"sample_every_s": 2.0}, "sample_every_s"),
+        ({"motion": "teleport"}, "motion must be one of"),
+        ({"expert_lead": "velocity"}, "needs frame_gap_s > 0"),
+        ({"frame_gap_s": 0.6}, "frame_gap_s must be in"),
+        ({"holdout_box_m": (0.6, 0.5, 0.0, 0.3)}, "holdout_box_m must be"),
     ],
 )
 def test_collect_config_names_bad_values(kwargs, message):
