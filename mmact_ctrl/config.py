@@ -53,6 +53,10 @@ class StackConfig:
             chunk has run out) the reference brakes to rest within the smoother's limits and holds, s.
         splice_radius_m: a chunk whose position at its activation is farther than this from the reference
             being executed is rejected (the previous chunk keeps running), m.
+        tcp_floor_m: the lowest height the TCP reference is ever put at, m (world frame; the table top is z = 0):
+            a waypoint, correction or target below it is raised to it in every mode (counted in
+            ``floor_clamps``). Found with the 3-D policy: a chunk aimed at the table drove the fingers into it,
+            and the contact pushed joint 6 past its velocity limit. The fingertips reach about 1 cm below the TCP.
         mpc_plan_start: hybrid with MPC: where each plan starts, ``measured`` (the robot's state) or ``tracked``
             (the previous plan's state now; see ``HybridController._plan_start``).
         plan_resync_m, plan_resync_m_s: ``tracked``: a plan starts from the state being tracked unless the TCP is
@@ -80,6 +84,7 @@ class StackConfig:
     ensemble_decay_per_s: float = 1.0
     chunk_timeout_s: float = 2.5
     splice_radius_m: float = 0.1
+    tcp_floor_m: float = 0.05
     mpc_plan_start: str = "measured"
     plan_resync_m: float = 0.02
     plan_resync_m_s: float = 0.25
@@ -115,6 +120,8 @@ class StackConfig:
             raise ValueError(f"chunk_timeout_s must be a finite number > 0, got {self.chunk_timeout_s}")
         if not self.splice_radius_m > 0:
             raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
+        if not math.isfinite(self.tcp_floor_m):
+            raise ValueError(f"tcp_floor_m must be a finite height in m, got {self.tcp_floor_m}")
         if self.mpc_plan_start not in ("measured", "tracked"):
             raise ValueError(f"mpc_plan_start must be 'measured' or 'tracked', got {self.mpc_plan_start!r}")
         if not (self.plan_resync_m > 0 and self.plan_resync_m_s > 0):

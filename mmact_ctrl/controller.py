@@ -85,6 +85,7 @@ class HybridController:
         self.terms: RobotTerms | None = None
         self.stop: StopTrajectory | None = None  # the watchdog's braking reference while no valid chunk covers now
         self.watchdog_stops = 0
+        self.floor_clamps = 0  # reference samples raised to config.tcp_floor_m
         self.plan_resyncs = 0  # MPC plans started from the measured state because the robot left the tracked one
         self.mpc_bypass_ticks = 0  # ticks tracking the smoothed reference directly: no good MPC plan covered them
         self._good_plan_end_s = 0.0
@@ -113,6 +114,7 @@ class HybridController:
         self.qp.reset(tau_start)
         self.stop = None
         self.watchdog_stops = 0
+        self.floor_clamps = 0
         self.plan_resyncs = 0
         self.mpc_bypass_ticks = 0
         self._good_plan_end_s = 0.0
@@ -212,7 +214,16 @@ class HybridController:
     # ---- the 1 kHz tick ------------------------------------------------------------
     def reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """(pos m, vel m/s, rotvec rad, rotvec rate rad/s, gripper m) before smoothing: the watchdog's stop, the hold
-        before the first chunk, or the executor's sample of the executed chunk(s) plus its correction."""
+        before the first chunk, or the executor's sample of the executed chunk(s) plus its correction; never below
+        ``config.tcp_floor_m`` (a raised sample has no downward velocity and counts in ``floor_clamps``)."""
+        pos, vel, rotvec, rate, gripper = self._raw_reference(t_s)
+        if pos[2] < self.config.tcp_floor_m:
+            self.floor_clamps += 1
+            pos = np.array([pos[0], pos[1], self.config.tcp_floor_m])
+            vel = np.array([vel[0], vel[1], max(vel[2], 0.0)])
+        return pos, vel, rotvec, rate, gripper
+
+    def _raw_reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         if self.stop is not None:
             action, rate = self.stop.sample(t_s)
             return action[:3], rate[:3], action[3:6], rate[3:6], float(action[6])
@@ -231,7 +242,9 @@ class HybridController:
             return np.tile(self._hold_pos, (len(times_s), 1))
         pos = self.executor.sample_positions(times_s, self.active)
         offsets = self.executor.offsets_many(times_s, self.active)
-        return pos if offsets is None else pos + offsets
+        pos = pos if offsets is None else pos + offsets
+        pos[:, 2] = np.maximum(pos[:, 2], self.config.tcp_floor_m)
+        return pos
 
     def _plan_start(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms):
         """Where a new MPC plan starts. ``config.mpc_plan_start == "measured"`` (default): the measured state (the
@@ -261,6 +274,7 @@ class HybridController:
         preview = self.reference_positions(t_s + taus)
         if self.smoothing and self.config.smoother.relative:
             preview = preview + self.smoother.preview_pos_offset(taus)
+            preview[:, 2] = np.maximum(preview[:, 2], self.config.tcp_floor_m)
         q0, dq0, pos0, rot0, jac0 = self._plan_start(t_s, q_rad, dq_rad_s, terms)
         return self.mpc.solve(t_s, q0, dq0, pos0, jac0, preview, orientation_error(rot_des, rot0))
 
@@ -269,6 +283,10 @@ class HybridController:
         pos, vel, rotvec, rotvec_rate, gripper = self.reference(t_s)
         if self.smoothing:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
+            if pos[2] < self.config.tcp_floor_m:  # the smoother's decaying offset of a chunk switch may dip below it
+                self.floor_clamps += 1
+                pos = np.array([pos[0], pos[1], self.config.tcp_floor_m])
+                vel, acc = np.array([vel[0], vel[1], max(vel[2], 0.0)]), np.array([acc[0], acc[1], max(acc[2], 0.0)])
             self._smoothed_pos = pos
         else:
             acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)

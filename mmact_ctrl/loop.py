@@ -79,6 +79,7 @@ class EpisodeLog:
     rate_clamps: int = 0
     qp_rescues: int = 0
     plan_resyncs: int = 0
+    floor_clamps: int = 0
     mpc_bypass_ticks: int = 0
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)
@@ -288,6 +289,7 @@ def run_episode(
     if controller.mpc is not None:
         log.mpc_failures = controller.mpc.failures + controller.mpc.late
     log.plan_resyncs = controller.plan_resyncs
+    log.floor_clamps = controller.floor_clamps
     log.mpc_bypass_ticks = controller.mpc_bypass_ticks
     log.safety_counts = monitor.counts
     log.torque_rate_max_nm_s = monitor.torque_rate_max_nm_s

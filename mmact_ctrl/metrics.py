@@ -22,7 +22,7 @@
 - faults survived: ``rejected_chunks`` (and ``rejections`` per reason, ``mmact_ctrl.chunk_intake``),
   ``watchdog_stops``, ``gated_measurements`` (non-finite, frozen, outlier), ``missed_ticks``, ``aborts``
   (episodes the robot would have aborted: 20 missed ticks in a row), ``rate_clamps`` (solver-tolerance
-  corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``, ``mpc_bypass_ticks`` (ticks with
+  corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``, ``floor_clamps`` (reference samples raised to the TCP floor above the table), ``mpc_bypass_ticks`` (ticks with
   no good MPC plan, tracking the smoothed reference directly).
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
@@ -83,7 +83,8 @@ SAFETY_KEYS: dict[str, str] = {
 }
 #: fault counters summed over episodes
 FAULT_KEYS: tuple[str, ...] = ("rejected_chunks", "watchdog_stops", "gated_measurements", "missed_ticks", "aborts",
-                               "rate_clamps", "qp_rescues", "plan_resyncs", "mpc_bypass_ticks", "perception_errors")
+                               "rate_clamps", "qp_rescues", "plan_resyncs", "mpc_bypass_ticks", "perception_errors",
+                               "floor_clamps")
 
 
 def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
@@ -154,6 +155,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "rate_clamps": int(log.rate_clamps),
         "qp_rescues": int(log.qp_rescues),
         "plan_resyncs": int(log.plan_resyncs),
+        "floor_clamps": int(log.floor_clamps),
         "mpc_bypass_ticks": int(log.mpc_bypass_ticks),
         "perception_errors": int(log.perception_errors),
         "measurements": int(log.measurements),
