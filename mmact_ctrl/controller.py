@@ -218,10 +218,15 @@ class HybridController:
         ``config.tcp_floor_m`` (a raised sample has no downward velocity and counts in ``floor_clamps``)."""
         pos, vel, rotvec, rate, gripper = self._raw_reference(t_s)
         if pos[2] < self.config.tcp_floor_m:
-            self.floor_clamps += 1
-            pos = np.array([pos[0], pos[1], self.config.tcp_floor_m])
-            vel = np.array([vel[0], vel[1], max(vel[2], 0.0)])
+            pos, (vel,) = self._raise_to_floor(pos, vel)
         return pos, vel, rotvec, rate, gripper
+
+    def _raise_to_floor(self, pos: np.ndarray, *rates: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+        """``pos`` raised to ``config.tcp_floor_m`` (counted in ``floor_clamps``), its rates (velocity,
+        acceleration) with no downward component left."""
+        self.floor_clamps += 1
+        up = tuple(np.array([r[0], r[1], max(r[2], 0.0)]) for r in rates)
+        return np.array([pos[0], pos[1], self.config.tcp_floor_m]), up
 
     def _raw_reference(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         if self.stop is not None:
@@ -243,7 +248,9 @@ class HybridController:
         pos = self.executor.sample_positions(times_s, self.active)
         offsets = self.executor.offsets_many(times_s, self.active)
         pos = pos if offsets is None else pos + offsets
-        pos[:, 2] = np.maximum(pos[:, 2], self.config.tcp_floor_m)
+        if np.any(pos[:, 2] < self.config.tcp_floor_m):  # a copy: the executor's array may be its own cache
+            pos = pos.copy()
+            pos[:, 2] = np.maximum(pos[:, 2], self.config.tcp_floor_m)
         return pos
 
     def _plan_start(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms):
@@ -284,9 +291,7 @@ class HybridController:
         if self.smoothing:
             pos, vel, acc, rotvec, ang_vel, ang_acc = self.smoother.step(pos, vel, rotvec, rotvec_rate)
             if pos[2] < self.config.tcp_floor_m:  # the smoother's decaying offset of a chunk switch may dip below it
-                self.floor_clamps += 1
-                pos = np.array([pos[0], pos[1], self.config.tcp_floor_m])
-                vel, acc = np.array([vel[0], vel[1], max(vel[2], 0.0)]), np.array([acc[0], acc[1], max(acc[2], 0.0)])
+                pos, (vel, acc) = self._raise_to_floor(pos, vel, acc)
             self._smoothed_pos = pos
         else:
             acc, ang_vel, ang_acc = np.zeros(3), rotvec_rate, np.zeros(3)
