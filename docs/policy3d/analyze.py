@@ -4,8 +4,9 @@ from pathlib import Path
 import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from mmact_ctrl.stats import wilson_interval as wilson
+from scenarios.collect import in_box
 
-HOLD = (0.5, 0.65, 0.0, 0.3)
+HOLD = (0.5, 0.65, 0.0, 0.3)  # the --holdout-box-m of the training data
 d = Path(sys.argv[1])
 for f in sorted(d.glob("*.json")):
     p = json.loads(f.read_text())
@@ -20,7 +21,7 @@ for f in sorted(d.glob("*.json")):
                 f"switch acc {np.median(acc):5.2f} m/s2 viol {viol}")
         print(line)
         if "static" in f.stem and "target_start_pos_m" in eps[0]:
-            inb = np.array([HOLD[0] <= e["target_start_pos_m"][0] <= HOLD[1] and HOLD[2] <= e["target_start_pos_m"][1] <= HOLD[3] for e in eps])
+            inb = np.array([in_box(e["target_start_pos_m"], HOLD) for e in eps])
             for name, m in (("held-out box", inb), ("rest", ~inb)):
                 if m.any():
                     lo, hi = wilson(int(s[m].sum()), int(m.sum()))
