@@ -137,6 +137,16 @@ def test_retarget_rules_and_trust_radius():
     off1, _ = retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)
     assert np.allclose(off0, now - at_obs)  # at activation: the displacement only
     assert np.allclose(aim + off1, now)  # at the last waypoint: exactly on the filtered target
+    # land: the aim is the chunk's own position at t_last (here 1 cm short of its last waypoint), past it its
+    # position now with its rate: on the filtered target at t_last and after, whatever is left of the approach
+    land = RetargetConfig("land", 0.1)
+    short = aim - np.array([0.01, 0.0, 0.0])
+    off_l, dv_l = retarget_offset(land, 2.0, short, at_obs, now, vel, 0.5, 2.0)
+    assert np.allclose(short + off_l, now) and np.allclose(dv_l, vel)
+    assert not np.allclose(short + retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)[0], now)  # snap: 1 cm off
+    moving, rate = aim + 0.02, np.array([0.05, 0.0, 0.0])
+    off_p, dv_p = retarget_offset(land, 2.5, moving, at_obs, now, vel, 0.5, 2.0, rate)
+    assert np.allclose(moving + off_p, now) and np.allclose(rate + dv_p, vel)  # past t_last: held on the target
     assert trusted(disp, aim, at_obs)
     assert not trusted(disp, aim, aim + 0.2)  # not the chunk's target
     assert not trusted(RetargetConfig("none"), aim, at_obs)

@@ -1,5 +1,5 @@
-"""``hybrid``: ours. The chunk is retargeted with the Kalman-filtered target (``controllers.retarget``: the
-displacement of the target since the chunk's observation, gated by a trust radius), smoothed by Ruckig and
+"""``hybrid``: ours. The chunk is retargeted with the Kalman-filtered target (``controllers.retarget``: by default
+``land``, the chunk lands on the estimate by the time the next chunk is due; gated by a trust radius), smoothed by Ruckig and
 previewed by the MPC before the 1 kHz QP tracks it (each layer a ``StackConfig`` switch)."""
 
 from __future__ import annotations
@@ -29,8 +29,10 @@ class HybridExecutor(ClockedExecutor):
         self._trust: tuple[ChunkReference | None, tuple[bool, bool]] = (None, (False, False))  # (ref, _aim of it)
         self._last: ChunkReference | None = None  # the chunk executed before the active one
         self._carry: tuple[ChunkReference | None, np.ndarray] = (None, ZERO3)  # (leading ref, the step it carries)
+        self._land: tuple[ChunkReference | None, np.ndarray] = (None, ZERO3)  # (resting ref, its land aim)
 
     def reset(self) -> None:
+        self._land = (None, ZERO3)
         self._trust = (None, (False, False))
         self._last = None
         self._carry = (None, ZERO3)
@@ -80,6 +82,19 @@ class HybridExecutor(ClockedExecutor):
         one replan period after this one became active."""
         return min(ref.t_last_s, ref.t_active_s + 1.0 / self.controller.config.replan_hz)
 
+    def _rest_aim(self, ref: ChunkReference, t_s: float, t_last_s: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(aim m, its rate m/s or None) of a resting chunk for ``config.retarget``: ``snap`` the chunk's last
+        waypoint; ``land`` its own position at ``t_last_s`` (the last of it that will run), and past that its position
+        now with its rate, so the corrected reference lands on the estimate at ``t_last_s`` and stays on it."""
+        if self.controller.config.retarget.rule != "land":
+            return ref.aim_pos_m, None
+        if t_s > t_last_s:
+            w, w_rate = ref.sample(t_s)
+            return w[:3], w_rate[:3]
+        if self._land[0] is not ref:
+            self._land = (ref, ref.sample(t_last_s)[0][:3])
+        return self._land[1], None
+
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
         """A chunk at rest at its end: ``controllers.retarget.retarget_offset`` (the rule of ``config.retarget``).
         A moving (leading) chunk already follows the target's predicted course (walls included, when its source
@@ -101,8 +116,10 @@ class HybridExecutor(ClockedExecutor):
             carry = self._carry_for(ref, ref.t_active_s)
             return ((1.0 - alpha) * carry + alpha * gap,
                     alpha * (est.predict_vel(t_s) - w_rate[:3]) + dalpha * (gap - carry))
-        return retarget_offset(cfg, t_s, ref.aim_pos_m, ref.target_at_obs_m, est.predict_pos(t_s),
-                               est.predict_vel(t_s), ref.t_active_s, self._blend_end_s(ref))
+        t_last = self._blend_end_s(ref)
+        aim, aim_vel = self._rest_aim(ref, t_s, t_last)
+        return retarget_offset(cfg, t_s, aim, ref.target_at_obs_m, est.predict_pos(t_s),
+                               est.predict_vel(t_s), ref.t_active_s, t_last, aim_vel)
 
     def offsets_many(self, times_s: np.ndarray, ref: ChunkReference) -> np.ndarray | None:
         est = self.controller.filter
@@ -114,5 +131,7 @@ class HybridExecutor(ClockedExecutor):
             alpha = np.clip((np.asarray(times_s, dtype=float) - ref.t_active_s) / self._pull_span_s(ref), 0.0, 1.0)
             carry = self._carry_for(ref, ref.t_active_s)
             return (1.0 - alpha)[:, None] * carry + alpha[:, None] * (pred - ref.sample_positions(times_s))
-        return retarget_offsets(self.controller.config.retarget, times_s, ref.aim_pos_m, ref.target_at_obs_m, pred,
-                                ref.t_active_s, self._blend_end_s(ref))
+        cfg = self.controller.config.retarget
+        t_last = self._blend_end_s(ref)
+        aim = ref.sample_positions(np.maximum(np.asarray(times_s, dtype=float), t_last)) if cfg.rule == "land" else ref.aim_pos_m
+        return retarget_offsets(cfg, times_s, aim, ref.target_at_obs_m, pred, ref.t_active_s, t_last)
