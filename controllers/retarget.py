@@ -13,16 +13,20 @@ past the chunk's last waypoint, where the last waypoint is held):
   filtered target, so this also removes the chunk source's aim error and the dequantization
   error. (A pure pull ``alpha(t) * (p_hat(t) - aim)`` lags a moving target: with 1.6 s chunks
   replaced every second, alpha never passes ~0.6 and the TCP trailed by half a second.)
-- ``land`` (the default): ``snap`` with ``aim`` the chunk's own position at ``t_last`` (the last of it that will
-  run) instead of its last waypoint, and past ``t_last`` its position at ``t``: the reference lands exactly on the
-  filtered target when the next chunk is due and stays on it if that chunk is late or refused. ``snap`` lands there
-  only if the chunk's approach is over by ``t_last``; otherwise the rest of the approach, ``aim - chunk(t_last)``,
-  is left in the reference. For a chunk that aims wrong and keeps moving towards its wrong aim while the arm is
-  already at the target, that remainder pushes the arm away from the target at every replan (measured with the 3-D
-  policy, 5 Hz: ``land`` raised the tracking ratio from 0.22 to 0.36 on random_walk and from 0.34 to 0.59 on
-  accelerating; with the exact, leading expert it costs 0.01-0.08 of tracking at 5 Hz and nothing at 1 Hz).
+- ``warp`` (the default): ``snap`` with the blend weight taken from the chunk's own progress towards its aim,
+  ``w(t) = 1 - |aim - c(t)| / |aim - c(0)|`` (clipped to [0, 1]; ``c`` the chunk's position, ``c(0)`` its first
+  waypoint) instead of the time since activation: the chunk's path is bent so that it ends on the filtered target,
+  each point moved in proportion to how far along the path it is. A chunk that travels less than
+  ``min_travel_m`` (it rests where it starts) has no progress to measure and is blended in time as ``snap`` does.
+  Why: ``snap``'s time blend reaches 1 when the next chunk is due, whatever is left of the chunk's path. When a
+  chunk aims beside the ball and keeps heading there while the arm is already on the ball (the 3-D policy at
+  5 Hz), the full aim error is applied to a point of the path that is still near its start, and the reference
+  lands beside the ball on the other side: the arm is pushed off at every replan. With ``warp`` the reference
+  stays on the ball (``tests/test_land_retarget.py``). A rule that lands on the target within each replan period
+  instead (tried) turns a far approach at 5 Hz into a 1.7 m/s saw-tooth of the reference and drove the fingers
+  into the table.
 
-Both are gated by a trust radius: when the target estimate at the chunk's observation time
+All are gated by a trust radius: when the target estimate at the chunk's observation time
 is farther than ``trust_radius_m`` from the chunk's aim, the target is not the chunk's
 target, and the chunk runs unchanged.
 """
@@ -33,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-RULES: tuple[str, ...] = ("none", "displacement", "snap", "land")
+RULES: tuple[str, ...] = ("none", "displacement", "snap", "warp")
 
 
 @dataclass(frozen=True)
@@ -41,16 +45,20 @@ class RetargetConfig:
     """Attributes:
     rule: one of ``RULES``.
     trust_radius_m: gate on the distance between the chunk's aim and the target at observation time, m.
+    min_travel_m: ``warp``: a chunk whose aim is nearer than this to its first waypoint is blended in time, m.
     """
 
-    rule: str = "land"
+    rule: str = "warp"
     trust_radius_m: float = 0.3
+    min_travel_m: float = 0.02
 
     def __post_init__(self) -> None:
         if self.rule not in RULES:
             raise ValueError(f"retarget rule must be one of {RULES}, got {self.rule!r}")
         if not self.trust_radius_m > 0:
             raise ValueError(f"trust_radius_m must be > 0, got {self.trust_radius_m}")
+        if not self.min_travel_m > 0:
+            raise ValueError(f"min_travel_m must be > 0, got {self.min_travel_m}")
 
 
 def trusted(config: RetargetConfig, aim_pos_m: np.ndarray, target_at_obs_m: np.ndarray | None) -> bool:
@@ -58,6 +66,33 @@ def trusted(config: RetargetConfig, aim_pos_m: np.ndarray, target_at_obs_m: np.n
     if config.rule == "none" or target_at_obs_m is None:
         return False
     return bool(np.linalg.norm(aim_pos_m - target_at_obs_m) <= config.trust_radius_m)
+
+
+def progress(config: RetargetConfig, aim_pos_m: np.ndarray, start_pos_m: np.ndarray, pos_m: np.ndarray,
+             vel_m_s: np.ndarray) -> tuple[float, float] | None:
+    """``warp``'s weight ``w`` and its rate ``dw/dt`` (1/s) at a point ``pos_m`` of the chunk moving at ``vel_m_s``:
+    ``1 - |aim - pos| / |aim - start|`` clipped to [0, 1]; None when the chunk travels less than
+    ``config.min_travel_m`` (the caller blends in time)."""
+    travel = float(np.linalg.norm(aim_pos_m - start_pos_m))
+    if travel < config.min_travel_m:
+        return None
+    d = aim_pos_m - pos_m
+    left = float(np.linalg.norm(d))
+    w = 1.0 - left / travel
+    if w <= 0.0:
+        return 0.0, 0.0
+    if w >= 1.0 or left < 1e-12:
+        return 1.0, 0.0
+    return w, float(d @ vel_m_s) / (left * travel)
+
+
+def progresses(config: RetargetConfig, aim_pos_m: np.ndarray, start_pos_m: np.ndarray,
+               pos_m: np.ndarray) -> np.ndarray | None:
+    """:func:`progress`'s weights (N,) at many points ``pos_m`` (N, 3) at once (None: blend in time)."""
+    travel = float(np.linalg.norm(aim_pos_m - start_pos_m))
+    if travel < config.min_travel_m:
+        return None
+    return np.clip(1.0 - np.linalg.norm(aim_pos_m - pos_m, axis=1) / travel, 0.0, 1.0)
 
 
 def retarget_offset(
@@ -69,28 +104,28 @@ def retarget_offset(
     target_vel_m_s: np.ndarray,
     t_active_s: float,
     t_last_s: float,
-    aim_vel_m_s: np.ndarray | None = None,
+    weight: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(offset m, offset velocity m/s) to add to the chunk's position reference at ``t_s``.
 
     Args:
-        aim_pos_m: ``snap``: the chunk's last waypoint position; ``land``: the chunk's position at ``max(t_s, t_last_s)``.
-        aim_vel_m_s: the rate of ``aim_pos_m`` (``land`` past ``t_last_s``; None: constant).
+        aim_pos_m: the chunk's last waypoint position.
         target_at_obs_m: filtered target estimate at the chunk's observation time.
         target_pos_m, target_vel_m_s: filtered target estimate (predicted) at ``t_s``.
-        t_active_s: when the chunk became active; t_last_s: time of its last waypoint.
+        t_active_s: when the chunk became active; t_last_s: time of its last waypoint that will run.
+        weight: ``warp``: ``(w, dw/dt)`` of :func:`progress` (None: the time blend of ``snap``).
     """
     if config.rule == "displacement":
         return target_pos_m - target_at_obs_m, target_vel_m_s
-    if config.rule in ("snap", "land"):
-        span = max(t_last_s - t_active_s, 1e-6)
-        alpha = min(max((t_s - t_active_s) / span, 0.0), 1.0)
-        dalpha = 1.0 / span if 0.0 < alpha < 1.0 else 0.0
+    if config.rule in ("snap", "warp"):
+        if config.rule == "warp" and weight is not None:
+            alpha, dalpha = weight
+        else:
+            span = max(t_last_s - t_active_s, 1e-6)
+            alpha = min(max((t_s - t_active_s) / span, 0.0), 1.0)
+            dalpha = 1.0 / span if 0.0 < alpha < 1.0 else 0.0
         aim_error = target_at_obs_m - aim_pos_m
-        vel = target_vel_m_s + dalpha * aim_error
-        if aim_vel_m_s is not None:
-            vel = vel - alpha * aim_vel_m_s
-        return target_pos_m - target_at_obs_m + alpha * aim_error, vel
+        return target_pos_m - target_at_obs_m + alpha * aim_error, target_vel_m_s + dalpha * aim_error
     return np.zeros(3), np.zeros(3)
 
 
@@ -102,17 +137,20 @@ def retarget_offsets(
     target_pos_m: np.ndarray,
     t_active_s: float,
     t_last_s: float,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """Position offsets (N, 3) of :func:`retarget_offset` at many times at once (the MPC's preview).
 
-    ``target_pos_m`` (N, 3) is the predicted target at ``times_s`` (N,); ``aim_pos_m`` is (3,) or, for ``land``,
-    (N, 3) (the chunk's position at ``max(t, t_last_s)`` for each time)."""
+    ``target_pos_m`` (N, 3) is the predicted target at ``times_s`` (N,); ``weights`` (N,) ``warp``'s
+    :func:`progresses` (None: the time blend)."""
     times_s = np.asarray(times_s, dtype=float)
     if config.rule == "displacement":
         return target_pos_m - target_at_obs_m
-    if config.rule in ("snap", "land"):
-        span = max(t_last_s - t_active_s, 1e-6)
-        alpha = np.clip((times_s - t_active_s) / span, 0.0, 1.0)
+    if config.rule in ("snap", "warp"):
+        if config.rule == "warp" and weights is not None:
+            alpha = weights
+        else:
+            span = max(t_last_s - t_active_s, 1e-6)
+            alpha = np.clip((times_s - t_active_s) / span, 0.0, 1.0)
         return target_pos_m - target_at_obs_m + alpha[:, None] * (target_at_obs_m - aim_pos_m)
     return np.zeros((len(times_s), 3))
-

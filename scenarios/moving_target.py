@@ -123,11 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-ruckig", action="store_true", help="hybrid: track the retargeted reference without Ruckig smoothing")
     g.add_argument("--no-mpc", action="store_true",
                    help="hybrid: no MPC between Ruckig and the QP (the QP tracks the smoothed reference directly)")
-    g.add_argument("--retarget", choices=RULES, default="land",
+    g.add_argument("--retarget", choices=RULES, default="warp",
                    help="hybrid: displacement shifts the chunk by how far the filtered target moved since the observation; "
-                        "snap pulls the chunk's aim onto the filtered target (also removes aim and quantization error); "
-                        "land pulls the chunk onto the filtered target by the time the next chunk is due, however far its "
-                        "approach still had to go (the chunk's remaining path is not kept); none")
+                        "snap pulls the chunk's aim onto the filtered target (also removes aim and quantization error), "
+                        "blended in over time; warp (default) does the same in proportion to the chunk's own progress "
+                        "along its path, so a chunk that aims beside the ball does not push the arm off it; none")
     g.add_argument("--trust-radius-m", type=_number(float, "--trust-radius-m", 0, False), default=0.3,
                    help="retargeting only applies when the target is within this distance of the chunk's aim")
     g.add_argument("--replan-hz", type=_number(float, "--replan-hz", 0, False), default=1.0,

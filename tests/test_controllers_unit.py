@@ -5,7 +5,7 @@ import pytest
 import qpsolvers
 
 from controllers.qp_id import TaskReference, TaskSpaceQP
-from controllers.retarget import RetargetConfig, retarget_offset, trusted
+from controllers.retarget import RetargetConfig, progress, progresses, retarget_offset, trusted
 from controllers.robot_description import JointLimits
 from controllers.robot_model import PandaModel
 from controllers.smoother import SmootherConfig, TaskSpaceSmoother
@@ -137,16 +137,20 @@ def test_retarget_rules_and_trust_radius():
     off1, _ = retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)
     assert np.allclose(off0, now - at_obs)  # at activation: the displacement only
     assert np.allclose(aim + off1, now)  # at the last waypoint: exactly on the filtered target
-    # land: the aim is the chunk's own position at t_last (here 1 cm short of its last waypoint), past it its
-    # position now with its rate: on the filtered target at t_last and after, whatever is left of the approach
-    land = RetargetConfig("land", 0.1)
-    short = aim - np.array([0.01, 0.0, 0.0])
-    off_l, dv_l = retarget_offset(land, 2.0, short, at_obs, now, vel, 0.5, 2.0)
-    assert np.allclose(short + off_l, now) and np.allclose(dv_l, vel)
-    assert not np.allclose(short + retarget_offset(snap, 2.0, aim, at_obs, now, vel, 0.5, 2.0)[0], now)  # snap: 1 cm off
-    moving, rate = aim + 0.02, np.array([0.05, 0.0, 0.0])
-    off_p, dv_p = retarget_offset(land, 2.5, moving, at_obs, now, vel, 0.5, 2.0, rate)
-    assert np.allclose(moving + off_p, now) and np.allclose(rate + dv_p, vel)  # past t_last: held on the target
+    # warp: the aim error is weighed by the chunk's progress along its path (start -> aim), not by time
+    warp = RetargetConfig("warp", 0.1)
+    start = aim - np.array([0.2, 0.0, 0.0])
+    w_half = progress(warp, aim, start, aim - np.array([0.1, 0.0, 0.0]), np.array([0.5, 0.0, 0.0]))
+    assert np.isclose(w_half[0], 0.5) and np.isclose(w_half[1], 0.5 / 0.2)  # halfway, closing at 0.5 m/s on 0.2 m
+    off_w, dv_w = retarget_offset(warp, 0.6, aim, at_obs, now, vel, 0.5, 2.0, w_half)
+    assert np.allclose(off_w, now - at_obs + 0.5 * (at_obs - aim)) and np.allclose(dv_w, vel + 2.5 * (at_obs - aim))
+    assert progress(warp, aim, start, aim, np.zeros(3)) == (1.0, 0.0)  # at its aim: exactly on the filtered target
+    assert progress(warp, aim, start, start - 0.05, np.zeros(3)) == (0.0, 0.0)  # moving away from the aim: clipped
+    assert progress(warp, aim, aim + 0.005, aim, np.zeros(3)) is None  # a resting chunk: blended in time as snap
+    assert np.allclose(retarget_offset(warp, 2.0, aim, at_obs, now, vel, 0.5, 2.0, None)[0], off1)
+    assert np.allclose(progresses(warp, aim, start, np.array([start, aim - [0.05, 0, 0], aim])), [0.0, 0.75, 1.0])
+    with pytest.raises(ValueError, match="min_travel_m"):
+        RetargetConfig("warp", min_travel_m=0.0)
     assert trusted(disp, aim, at_obs)
     assert not trusted(disp, aim, aim + 0.2)  # not the chunk's target
     assert not trusted(RetargetConfig("none"), aim, at_obs)

@@ -106,7 +106,7 @@ def test_plan_sample_kernel_matches_mpc_plan():
 
 
 @pytest.mark.parametrize("tail", ["resting", "leading"])
-@pytest.mark.parametrize("rule", ["land", "snap", "displacement", "none"])
+@pytest.mark.parametrize("rule", ["warp", "snap", "displacement", "none"])
 def test_vectorized_preview_equals_pointwise_reference(rule, tail):
     from controllers.retarget import RetargetConfig
     from mmact_ctrl.chunk import ActionChunk
@@ -130,7 +130,7 @@ def test_vectorized_preview_equals_pointwise_reference(rule, tail):
     ctrl.activate(ActionChunk(waypoints=wp, dt_s=0.1, t0_s=0.1), 0.3, ctrl.target_estimate(0.29))
     preview = ctrl.reference_positions(times)
     np.testing.assert_allclose(preview, np.array([ctrl.reference(t)[0] for t in times]), atol=1e-12)
-    # the retargeting branch was exercised for land / snap / displacement
+    # the retargeting branch was exercised for warp / snap / displacement
     assert (rule == "none") != bool(np.any(ctrl.executor.offset(1.0, ctrl.active)[0]))
 
 

@@ -1,12 +1,12 @@
 """``hybrid``: ours. The chunk is retargeted with the Kalman-filtered target (``controllers.retarget``: by default
-``land``, the chunk lands on the estimate by the time the next chunk is due; gated by a trust radius), smoothed by Ruckig and
+``warp``, the chunk's path bent onto the estimate in proportion to its own progress; gated by a trust radius), smoothed by Ruckig and
 previewed by the MPC before the 1 kHz QP tracks it (each layer a ``StackConfig`` switch)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from controllers.retarget import retarget_offset, retarget_offsets, trusted
+from controllers.retarget import progress, progresses, retarget_offset, retarget_offsets, trusted
 from mmact_ctrl.executors.base import ZERO3, ClockedExecutor, Layers
 from mmact_ctrl.reference import ChunkReference
 
@@ -29,10 +29,8 @@ class HybridExecutor(ClockedExecutor):
         self._trust: tuple[ChunkReference | None, tuple[bool, bool]] = (None, (False, False))  # (ref, _aim of it)
         self._last: ChunkReference | None = None  # the chunk executed before the active one
         self._carry: tuple[ChunkReference | None, np.ndarray] = (None, ZERO3)  # (leading ref, the step it carries)
-        self._land: tuple[ChunkReference | None, np.ndarray] = (None, ZERO3)  # (resting ref, its land aim)
 
     def reset(self) -> None:
-        self._land = (None, ZERO3)
         self._trust = (None, (False, False))
         self._last = None
         self._carry = (None, ZERO3)
@@ -82,21 +80,9 @@ class HybridExecutor(ClockedExecutor):
         one replan period after this one became active."""
         return min(ref.t_last_s, ref.t_active_s + 1.0 / self.controller.config.replan_hz)
 
-    def _rest_aim(self, ref: ChunkReference, t_s: float, t_last_s: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """(aim m, its rate m/s or None) of a resting chunk for ``config.retarget``: ``snap`` the chunk's last
-        waypoint; ``land`` its own position at ``t_last_s`` (the last of it that will run), and past that its position
-        now with its rate, so the corrected reference lands on the estimate at ``t_last_s`` and stays on it."""
-        if self.controller.config.retarget.rule != "land":
-            return ref.aim_pos_m, None
-        if t_s > t_last_s:
-            w, w_rate = ref.sample(t_s)
-            return w[:3], w_rate[:3]
-        if self._land[0] is not ref:
-            self._land = (ref, ref.sample(t_last_s)[0][:3])
-        return self._land[1], None
-
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
-        """A chunk at rest at its end: ``controllers.retarget.retarget_offset`` (the rule of ``config.retarget``).
+        """A chunk at rest at its end: ``controllers.retarget.retarget_offset`` (the rule of ``config.retarget``;
+        ``warp`` weighs the aim error by the chunk's progress along its path, ``controllers.retarget.progress``).
         A moving (leading) chunk already follows the target's predicted course (walls included, when its source
         knows them), so only the difference between where it is and where the estimate says the target is, is
         pulled in, blended over :meth:`_pull_span_s` from the step ``c`` it carries over from the previous reference
@@ -116,10 +102,12 @@ class HybridExecutor(ClockedExecutor):
             carry = self._carry_for(ref, ref.t_active_s)
             return ((1.0 - alpha) * carry + alpha * gap,
                     alpha * (est.predict_vel(t_s) - w_rate[:3]) + dalpha * (gap - carry))
-        t_last = self._blend_end_s(ref)
-        aim, aim_vel = self._rest_aim(ref, t_s, t_last)
-        return retarget_offset(cfg, t_s, aim, ref.target_at_obs_m, est.predict_pos(t_s),
-                               est.predict_vel(t_s), ref.t_active_s, t_last, aim_vel)
+        weight = None
+        if cfg.rule == "warp":
+            w, w_rate = ref.sample(t_s)
+            weight = progress(cfg, ref.aim_pos_m, ref.chunk.waypoints[0, :3], w[:3], w_rate[:3])
+        return retarget_offset(cfg, t_s, ref.aim_pos_m, ref.target_at_obs_m, est.predict_pos(t_s),
+                               est.predict_vel(t_s), ref.t_active_s, self._blend_end_s(ref), weight)
 
     def offsets_many(self, times_s: np.ndarray, ref: ChunkReference) -> np.ndarray | None:
         est = self.controller.filter
@@ -132,6 +120,8 @@ class HybridExecutor(ClockedExecutor):
             carry = self._carry_for(ref, ref.t_active_s)
             return (1.0 - alpha)[:, None] * carry + alpha[:, None] * (pred - ref.sample_positions(times_s))
         cfg = self.controller.config.retarget
-        t_last = self._blend_end_s(ref)
-        aim = ref.sample_positions(np.maximum(np.asarray(times_s, dtype=float), t_last)) if cfg.rule == "land" else ref.aim_pos_m
-        return retarget_offsets(cfg, times_s, aim, ref.target_at_obs_m, pred, ref.t_active_s, t_last)
+        weights = None
+        if cfg.rule == "warp":
+            weights = progresses(cfg, ref.aim_pos_m, ref.chunk.waypoints[0, :3], ref.sample_positions(times_s))
+        return retarget_offsets(cfg, times_s, ref.aim_pos_m, ref.target_at_obs_m, pred, ref.t_active_s,
+                                self._blend_end_s(ref), weights)
