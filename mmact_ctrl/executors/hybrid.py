@@ -1,6 +1,6 @@
 """``hybrid``: ours. The chunk is retargeted with the Kalman-filtered target (``controllers.retarget``: by default
-``warp``, the chunk's path bent onto the estimate in proportion to its own progress; gated by a trust radius), smoothed by Ruckig and
-previewed by the MPC before the 1 kHz QP tracks it (each layer a ``StackConfig`` switch)."""
+``warp``, the chunk's path bent onto the estimate in proportion to its own progress; gated by a trust radius),
+smoothed by Ruckig and previewed by the MPC before the 1 kHz QP tracks it (each layer a ``StackConfig`` switch)."""
 
 from __future__ import annotations
 
