@@ -22,7 +22,7 @@ past the chunk's last waypoint, where the last waypoint is held):
   chunk aims beside the ball and keeps heading there while the arm is already on the ball (the 3-D policy at
   5 Hz), the full aim error is applied to a point of the path that is still near its start, and the reference
   lands beside the ball on the other side: the arm is pushed off at every replan. With ``warp`` the reference
-  stays on the ball (``tests/test_land_retarget.py``). A rule that lands on the target within each replan period
+  stays on the ball (``tests/test_warp_retarget.py``). A rule that lands on the target within each replan period
   instead (tried) turns a far approach at 5 Hz into a 1.7 m/s saw-tooth of the reference and drove the fingers
   into the table.
 
