@@ -52,6 +52,7 @@ from policy.dataset import DatasetError, dataset_shards, read_metas, read_shard,
 from policy.decoding import decode_parallel, target_tokens
 from policy.image_tokenizer import ImageTokenizer, evaluate_psnr, train_image_tokenizer
 from policy.text_tokenizer import TextTokenizer
+from policy.token_cache import TokenCacheError, load_token_cache, read_header, save_token_cache, tokenizer_fingerprint
 from policy.vocab import VocabLayout
 
 TASK_WEIGHT = {"mm2a": "action", "t2i": "image", "mmu": "text"}
@@ -84,6 +85,23 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
         parts["actions_f"].append(d["actions"].astype(np.float32))
         parts["target_pos_m"].append(d["target_pos_m"].astype(np.float32))
     return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def training_tokens(bundle: PolicyBundle, args) -> dict[str, np.ndarray]:
+    """The token arrays of ``--data``, read from ``--tokens-cache`` when that file exists (and was made by this
+    bundle's tokenizers), else tokenized from the frames (and written to ``--tokens-cache`` when one is named)."""
+    cache = getattr(args, "tokens_cache", None)
+    if cache and Path(cache).is_file():
+        try:
+            data, _ = load_token_cache(cache, bundle)
+        except TokenCacheError as exc:
+            raise SystemExit(f"--tokens-cache: {exc}") from None
+        return data
+    data = load_tokenized(bundle, args.data, not args.no_progress)
+    if cache:
+        save_token_cache(cache, data, read_metas(args.data), tokenizer_fingerprint(bundle), list(args.data))
+        print(f"tokens of {len(data['img'])} samples cached in {cache}", file=sys.stderr)
+    return data
 
 
 def check_views(bundle: PolicyBundle, meta: dict[str, Any], where) -> None:
@@ -393,7 +411,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
         for module in model.modules():
             if isinstance(module, torch.nn.Dropout):
                 module.p = float(args.dropout)
-    data = load_tokenized(bundle, args.data, not args.no_progress)
+    data = training_tokens(bundle, args)
     n = len(data["img"])
     train_idx, val_idx = split_indices(n, tc.val_fraction, tc.split_seed)
     if len(train_idx) == 0:
@@ -420,8 +438,26 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
                     "train_config": asdict(tc), "wall_s": wall0 + time.perf_counter() - t0}, resume_path)
 
     model.train()
+    budget = getattr(args, "time_budget_s", None)
+    warm_steps, calib_steps, t_warm = 10, 20, None  # the first steps (allocations, kernel choice) are not timed
     bar = tqdm(range(start, tc.steps), desc=f"stage {tc.stage}", initial=start, total=tc.steps, disable=args.no_progress)
     for step in bar:
+        if budget is not None:
+            used = time.perf_counter() - t0
+            if step == start + warm_steps:
+                t_warm = used
+            if step == start + warm_steps + calib_steps:
+                rate_s = (used - t_warm) / calib_steps
+                fit = budget_steps(step, 1, rate_s, budget - used, tc.steps)
+                if fit < tc.steps:
+                    print(f"--time-budget-s {budget:g}: {rate_s:.3f} s/step, --steps {tc.steps} -> {fit}", file=sys.stderr)
+                    tc = replace(tc, steps=fit)
+                    bar.total = fit
+            if step >= tc.steps or used > budget:
+                if step < tc.steps:
+                    print(f"--time-budget-s {budget:g}: stopped after {step} steps ({used:.0f} s)", file=sys.stderr)
+                    tc = replace(tc, steps=step)
+                break
         for g in opt.param_groups:
             g["lr"] = lr_at(step, tc)
         losses = {}
@@ -461,6 +497,38 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     return bundle.to("cpu"), info
 
 
+def resolve_data(args) -> dict[str, Any]:
+    """The data's meta from ``--data`` or an existing ``--tokens-cache`` (which then fills ``args.data``)."""
+    cache = args.tokens_cache
+    if cache and args.stage == 0:
+        raise SystemExit("--tokens-cache is for stages 1/2 (stage 0 trains the image tokenizer on the frames themselves)")
+    if cache and Path(cache).is_file():
+        try:
+            header = read_header(cache)
+        except TokenCacheError as exc:
+            raise SystemExit(f"--tokens-cache: {exc}") from None
+        if args.data and [str(Path(d)) for d in args.data] != [str(Path(d)) for d in header["data_paths"]]:
+            raise SystemExit(f"--tokens-cache {cache} holds the tokens of {header['data_paths']}, not of --data "
+                             f"{args.data}; leave --data out or name another cache file")
+        args.data = list(header["data_paths"])
+        return dict(header["meta"])
+    if not args.data:
+        raise SystemExit("--data is required (or --tokens-cache naming an existing cache, stages 1/2)")
+    try:
+        return read_metas(args.data)
+    except DatasetError as exc:
+        raise SystemExit(f"--data: {exc}") from None
+
+
+def budget_steps(step: int, done: int, elapsed_s: float, left_s: float, planned: int) -> int:
+    """The step count that fits the ``left_s`` seconds left, at step ``step``, at the speed of ``done`` steps
+    measured in ``elapsed_s``. Never more than ``planned`` and never fewer than ``step`` (the steps made)."""
+    if done <= 0 or elapsed_s <= 0:
+        return planned
+    fit = step + int(max(0.0, left_s) * done / elapsed_s)
+    return int(max(step, min(planned, fit)))
+
+
 def check_data_matches(bundle: PolicyBundle, meta: dict[str, Any], src) -> None:
     b = meta["action_bounds"]
     at = bundle.action_tokenizer
@@ -482,7 +550,7 @@ def write_model_card(path: Path, ckpt: Path, args, meta, info: dict[str, Any], h
         "MM-ACT-style unified-token policy of mmact-ctrl (`policy/`): one vocabulary "
         "`[special | task + segment | text | image codes | action bins]`, one bidirectional transformer, one tied head.", "",
         "## How it was made", "",
-        f"- command: `{' '.join(shlex.quote(a) for a in ['python', '-m', 'policy.train', *sys.argv[1:]])}`",
+        f"- command: `{info.get('command') or ' '.join(shlex.quote(a) for a in ['python', '-m', 'policy.train', *sys.argv[1:]])}`",
         f"- data: `{' '.join(args.data)}` ({info.get('n_samples')} samples; cameras {meta.get('camera_names')}, "
         f"{meta.get('image_size_px')} px, generator {meta.get('generator', 'scenarios.collect')})",
         f"- steps: {args.steps}, seed {args.seed}, device `{args.device}`",
@@ -513,9 +581,18 @@ def write_model_card(path: Path, ckpt: Path, args, meta, info: dict[str, Any], h
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(prog="python -m policy.train", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", required=True, nargs="+",
+    ap.add_argument("--data", nargs="*", default=[],
                     help="dataset directory (meta.json + shard_XXXX.npz); several directories are trained on together "
-                         "(they must agree on image size, cameras, chunk layout and action bins)")
+                         "(they must agree on image size, cameras, chunk layout and action bins); may be left out "
+                         "in stages 1/2 when --tokens-cache names an existing cache")
+    ap.add_argument("--tokens-cache", default=None, metavar="FILE",
+                    help="stages 1/2: the data's tokens in one file (policy.token_cache). Read when it exists (then "
+                         "--data may be left out: the cache holds the dataset's meta), else written after tokenizing "
+                         "--data. It lets an accelerator machine train without the frames")
+    ap.add_argument("--time-budget-s", type=float, default=None, metavar="S",
+                    help="stages 1/2: wall-clock budget of the training loop (s; the evaluation after it is extra). "
+                         "After 20 steps the speed is measured and --steps is lowered to what fits, so the learning-rate "
+                         "schedule still runs to its end; the loop also stops if it runs past S")
     ap.add_argument("--data-weights", type=float, nargs="+", default=None, metavar="W",
                     help="stages 1/2: one sampling weight per --data directory: its samples are drawn W times as often "
                          "as a sample of weight 1 (default: every sample equally)")
@@ -575,11 +652,10 @@ def main(argv: list[str] | None = None) -> Path:
         torch.set_num_threads(args.threads)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda but no CUDA device is available")
+    if args.time_budget_s is not None and not (math.isfinite(args.time_budget_s) and args.time_budget_s > 0):
+        ap.error(f"--time-budget-s must be a finite number of seconds > 0, got {args.time_budget_s}")
+    meta = resolve_data(args)
     check_data_weights(args.data_weights, len(args.data))
-    try:
-        meta = read_metas(args.data)
-    except DatasetError as exc:
-        raise SystemExit(f"--data: {exc}") from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / f"stage{args.stage}.pt"
