@@ -30,7 +30,7 @@ cat "$OUT/gpu.txt"
 WORK=$(mktemp -d)
 set -o pipefail
 "$PY" -m policy.train --tokens-cache "$CACHE" --stage 2 --init "$INIT" --out "$WORK/s2" --device "$DEVICE" \
-  --batch-size "$BATCH" --aux-batch-size $((BATCH / 8)) --lr "$LR" --dropout 0 --known-prefix-max 8 \
+  --batch-size "$BATCH" --aux-batch-size $(( BATCH >= 8 ? BATCH / 8 : 1 )) --lr "$LR" --dropout 0 --known-prefix-max 8 \
   --steps 100000 --time-budget-s "$BUDGET_S" --save-every 0 --eval-samples "$EVAL_SAMPLES" --no-progress \
   2>&1 | tee "$OUT/train.log"
 cp "$WORK/s2/stage2.pt" "$WORK/s2/MODEL_CARD.md" "$OUT/"
