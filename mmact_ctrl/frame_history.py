@@ -15,7 +15,12 @@ import numpy as np
 
 
 class EarlierFrame:
-    """One frame rendered ``gap_s`` before the next scheduled query.
+    """Frames rendered ``gap_s`` before the scheduled queries.
+
+    When the gap is longer than the replan period (a 0.4 s gap at 5 Hz), the frame of a query is due before the
+    query ahead of it has run: with ``period_s`` given, :meth:`tick` renders for the next ``ceil(gap_s / period_s)``
+    queries of the nominal schedule, and :meth:`take` hands each query the frame of the right age. A query whose
+    schedule moved (an executor that replans on activation) finds none, and counts as ``missing``.
 
     Args:
         render: returns the frame(s) ``(V, H, W, 3)`` uint8 of the world's cameras.
@@ -30,25 +35,41 @@ class EarlierFrame:
         self.reset()
 
     def reset(self) -> None:
-        self._frame: np.ndarray | None = None
-        self._t_s = -np.inf
-        self._for_plan_s = -np.inf
-        #: queries that got no earlier frame (the first one of an episode, or a query earlier than scheduled)
+        #: rendered frames: (render time s, frame), oldest first
+        self._frames: list[tuple[float, np.ndarray]] = []
+        self._served: set[float] = set()  # the query times already rendered for (rounded to the tick)
+        #: queries that got no earlier frame (the first one of an episode, or a query off its schedule)
         self.missing = 0
 
-    def tick(self, t_s: float, next_plan_s: float) -> None:
-        """Render now if ``t_s`` is ``gap_s`` before the scheduled query and that query has no frame yet."""
-        if self.gap_s <= 0 or next_plan_s == self._for_plan_s:
+    def tick(self, t_s: float, next_plan_s: float, period_s: float = float("inf")) -> None:
+        """Render now if ``t_s`` is ``gap_s`` before a scheduled query (the next one, and with ``period_s`` the ones
+        after it that the gap reaches) that has no frame yet; at most one render per tick."""
+        if self.gap_s <= 0:
             return
-        if t_s >= next_plan_s - self.gap_s - 0.5 * self.dt_s and t_s < next_plan_s - 0.5 * self.dt_s:
-            self._frame, self._t_s, self._for_plan_s = self._render(), t_s, next_plan_s
+        # a gap up to the period needs only the next query (the frame is due after the query ahead of it ran)
+        longer = np.isfinite(period_s) and period_s > 0 and self.gap_s > period_s + 0.5 * self.dt_s
+        ahead = int(np.ceil(self.gap_s / period_s)) if longer else 0
+        for k in range(ahead + 1):
+            q = next_plan_s + k * period_s if k else next_plan_s
+            key = round(q / self.dt_s)
+            if key in self._served:
+                continue
+            if q - self.gap_s - 0.5 * self.dt_s <= t_s < q - 0.5 * self.dt_s:
+                if not self._frames or self._frames[-1][0] != t_s:
+                    self._frames.append((t_s, self._render()))
+                self._served.add(key)
+        horizon = t_s - self.gap_s - 2.0 * self.dt_s
+        self._frames = [f for f in self._frames if f[0] >= horizon]
+        if len(self._served) > 64:
+            self._served = {k for k in self._served if k * self.dt_s >= t_s - 1.0}
 
     def take(self, t_s: float) -> np.ndarray | None:
-        """The frame for a query at ``t_s`` if one of about ``gap_s`` age exists (within one tick), else None."""
+        """The frame for a query at ``t_s`` if one of about ``gap_s`` age exists (within 1.5 ticks), else None."""
         if self.gap_s <= 0:
             return None
-        if self._frame is not None and abs((t_s - self._t_s) - self.gap_s) <= 1.5 * self.dt_s:
-            frame, self._frame = self._frame, None
-            return frame
+        for i, (t_r, frame) in enumerate(self._frames):
+            if abs((t_s - t_r) - self.gap_s) <= 1.5 * self.dt_s:
+                del self._frames[: i + 1]
+                return frame
         self.missing += 1
         return None

@@ -217,7 +217,7 @@ def run_episode(
             log.measurements += 1
             log.measurements_lost += m.pos_m is None
         perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
-        earlier.tick(t, next_plan_s)
+        earlier.tick(t, next_plan_s, replan_period_s)
         if t >= next_plan_s - eps:
             if k >= gap_ticks:  # the frame FRAME_GAP_S earlier (the target positions recorded so far)
                 prev, gap_s = log.target_pos_m[k - gap_ticks], gap_ticks * dt

@@ -178,6 +178,26 @@ def test_earlier_frame_is_rendered_once_a_gap_before_each_query():
         EarlierFrame(lambda: None, gap_s=-0.1, dt_s=0.001)
 
 
+def test_a_gap_longer_than_the_replan_period_still_gets_frames_of_the_right_age():
+    """A 0.4 s gap at 5 Hz: each query's frame is due before the query ahead of it has run."""
+    clock = {"t": 0.0}
+    renders = []
+    earlier = EarlierFrame(lambda: renders.append(clock["t"]) or np.full((1, 2, 2, 3), len(renders), np.uint8),
+                           gap_s=0.4, dt_s=0.001)
+    ages, next_plan = {}, 0.0
+    for k in range(3001):
+        t = clock["t"] = k * 0.001
+        earlier.tick(t, next_plan, 0.2)
+        if t >= next_plan - 0.0005:
+            frame = earlier.take(t)
+            ages[round(t, 3)] = None if frame is None else round(t - renders[int(frame[0, 0, 0, 0]) - 1], 3)
+            next_plan += 0.2
+    # the first two queries come before any frame 0.4 s old can exist; every later one gets exactly that age
+    assert ages[0.0] is None and ages[0.2] is None and earlier.missing == 2
+    assert all(ages[round(0.2 * i, 3)] == 0.4 for i in range(2, 16)), ages
+    assert len(renders) <= 16 + 1  # about one render per query, not one per tick
+
+
 class _TwoFrameExpert:
     """The expert behind a source that asks for an earlier frame; records what the loop hands it."""
 
