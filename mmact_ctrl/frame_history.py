@@ -51,6 +51,8 @@ class EarlierFrame:
         ahead = int(np.ceil(self.gap_s / period_s)) if longer else 0
         for k in range(ahead + 1):
             q = next_plan_s + k * period_s if k else next_plan_s
+            if not np.isfinite(q):  # no query scheduled (an executor that stopped asking)
+                break
             key = round(q / self.dt_s)
             if key in self._served:
                 continue
