@@ -9,6 +9,7 @@ When a query comes earlier than scheduled, or at the start of an episode, there 
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import numpy as np
@@ -47,21 +48,25 @@ class EarlierFrame:
         if self.gap_s <= 0:
             return
         # a gap up to the period needs only the next query (the frame is due after the query ahead of it ran)
-        longer = np.isfinite(period_s) and period_s > 0 and self.gap_s > period_s + 0.5 * self.dt_s
-        ahead = int(np.ceil(self.gap_s / period_s)) if longer else 0
+        longer = math.isfinite(period_s) and period_s > 0 and self.gap_s > period_s + 0.5 * self.dt_s
+        ahead = math.ceil(self.gap_s / period_s) if longer else 0
         for k in range(ahead + 1):
             q = next_plan_s + k * period_s if k else next_plan_s
-            if not np.isfinite(q):  # no query scheduled (an executor that stopped asking)
+            if not math.isfinite(q):  # no query scheduled (an executor that stopped asking)
                 break
             key = round(q / self.dt_s)
             if key in self._served:
                 continue
             if q - self.gap_s - 0.5 * self.dt_s <= t_s < q - 0.5 * self.dt_s:
                 if not self._frames or self._frames[-1][0] != t_s:
+                    self._forget_before(t_s - self.gap_s - 2.0 * self.dt_s)  # on a render only: no work per tick
                     self._frames.append((t_s, self._render()))
                 self._served.add(key)
-        horizon = t_s - self.gap_s - 2.0 * self.dt_s
-        self._frames = [f for f in self._frames if f[0] >= horizon]
+
+    def _forget_before(self, t_s: float) -> None:
+        """Drop the frames rendered before ``t_s`` (too old for any query) and the long-past query keys."""
+        while self._frames and self._frames[0][0] < t_s:
+            self._frames.pop(0)
         if len(self._served) > 64:
             self._served = {k for k in self._served if k * self.dt_s >= t_s - 1.0}
 
