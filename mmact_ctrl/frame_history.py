@@ -38,7 +38,7 @@ class EarlierFrame:
     def reset(self) -> None:
         #: rendered frames: (render time s, frame), oldest first
         self._frames: list[tuple[float, np.ndarray]] = []
-        self._served: set[float] = set()  # the query times already rendered for (rounded to the tick)
+        self._served: set[int] = set()  # the queries already rendered for, as their time in ticks
         #: queries that got no earlier frame (the first one of an episode, or a query off its schedule)
         self.missing = 0
 
@@ -64,11 +64,10 @@ class EarlierFrame:
                 self._served.add(key)
 
     def _forget_before(self, t_s: float) -> None:
-        """Drop the frames rendered before ``t_s`` (too old for any query) and the long-past query keys."""
+        """Drop the frames rendered before ``t_s`` (too old for any query) and the queries before it."""
         while self._frames and self._frames[0][0] < t_s:
             self._frames.pop(0)
-        if len(self._served) > 64:
-            self._served = {k for k in self._served if k * self.dt_s >= t_s - 1.0}
+        self._served = {k for k in self._served if k * self.dt_s >= t_s}  # queries that can still come
 
     def take(self, t_s: float) -> np.ndarray | None:
         """The frame for a query at ``t_s`` if one of about ``gap_s`` age exists (within 1.5 ticks), else None."""
