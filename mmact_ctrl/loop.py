@@ -20,10 +20,14 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.executors import QueryContext
 from mmact_ctrl.frame_history import EarlierFrame
 from mmact_ctrl.perception import OracleSensor, TargetSensor
+from mmact_ctrl.sources.contract import require_capabilities
 from mmact_ctrl.world import World
 
 #: the earlier frame a chunk source is shown beside the current one (``Observation.target_prev_pos_m``), s
 FRAME_GAP_S = 0.1
+#: the timing a source may report in ``ActionChunk.info`` (a remote source: its round trip and the server's own
+#: inference time), ms; collected per chunk into ``EpisodeLog.source_timing_ms``
+SOURCE_TIMING_KEYS: tuple[str, ...] = ("round_trip_ms", "server_infer_ms", "policy_infer_ms")
 
 
 @dataclass
@@ -56,6 +60,7 @@ class EpisodeLog:
     jump_times_s: tuple[float, ...] = ()
     change_times_s: tuple[float, ...] = ()
     delay_steps: list[float] = field(default_factory=list)
+    source_timing_ms: dict[str, list[float]] = field(default_factory=dict)
     objects_pos_m: np.ndarray | None = None  # (n, n_objects, 3) when the world has several objects
     target_index: int = 0
     qp_failures: int = 0
@@ -156,6 +161,9 @@ def run_episode(
     cfg = controller.config
     dt = cfg.dt_s
     n = int(round(cfg.duration_s / dt))
+    executor = controller.executor
+    # a mode that needs what the source cannot do is refused before the episode, in one line (never a silent episode)
+    require_capabilities(source, getattr(executor, "needs", ()), executor.name)
     state = world.reset(seed)
     if initial_dq_rad_s is not None:
         state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
@@ -187,7 +195,12 @@ def run_episode(
         log.target_index = int(getattr(world, "target_index", 0))
     next_plan_s = 0.0
     last_arrival_s = 0.0  # the watchdog's clock: the last valid chunk (or the start)
-    executor = controller.executor
+    source_reset = getattr(source, "reset", None)
+    if callable(source_reset):  # a new episode for the source (a LeRobot policy clears its action queue)
+        try:
+            source_reset()
+        except Exception as exc:  # noqa: BLE001 - a source fault: counted, the episode runs (its chunks may be refused)
+            log.events.append((0.0, "source_reset_raised", f"{type(exc).__name__}: {exc}"[:200]))
     gap_ticks = int(round(FRAME_GAP_S / dt))
     frame_every = int(round(1.0 / (video_fps * dt))) if video_fps > 0 else 0
     render_video = getattr(world, "render_video", None)  # optional part of a world: a larger frame for videos
@@ -232,6 +245,9 @@ def run_episode(
             log.plan_ms.append((time.perf_counter() - p0) * 1e3)
             if chunk is not None:
                 log.clipped_actions += chunk.n_clipped
+                for key in SOURCE_TIMING_KEYS:
+                    if key in chunk.info:
+                        log.source_timing_ms.setdefault(key, []).append(float(chunk.info[key]))
                 delay_s = log.plan_ms[-1] / 1e3 if cfg.measured_latency else latency_s
                 delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
                 intake.submit(t + delay_s, chunk, controller.target_estimate(t), obs.ee_pos_m)

@@ -26,6 +26,9 @@
   no good MPC plan, tracking the smoothed reference directly).
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
+- round_trip_ms: the same calls as median / p95 / max (for a source in another process, the chunk's round trip on the
+  wire); server_infer_ms / policy_infer_ms: what a remote source's server reported of its own inference time, ms
+  (``EpisodeLog.source_timing_ms``; absent for a source that reports none).
 - chunk_jump_acc_m_s2: largest TCP acceleration within +-50 ms of a chunk switch.
 - reaction (``mmact_ctrl.reaction``): for each change of the target's motion (a jump, flip, swerve, set-off:
   ``EpisodeLog.change_times_s``), ``reaction_s`` the median time until the TCP's velocity turns toward the new
@@ -169,6 +172,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "tick_us_p99": float(np.percentile(log.tick_us, 99)),
         "plan_ms_median": float(np.median(log.plan_ms)) if log.plan_ms else float("nan"),
         "plan_ms": [float(x) for x in log.plan_ms],
+        "source_timing_ms": {k: [float(x) for x in v] for k, v in log.source_timing_ms.items()},
         "realtime_factor": sim_s / log.wall_s if log.wall_s > 0 else float("nan"),
         "n_jumps": len(recovered),
         "jumps_recovered": int(sum(recovered)),
@@ -195,6 +199,18 @@ def _median_p99(values: list[float]) -> dict:
     if not values:
         return {"median": float("nan"), "p99": float("nan")}
     return {"median": float(np.median(values)), "p99": float(np.percentile(values, 99))}
+
+
+def _median_p95_max(values: list[float]) -> dict:
+    if not values:
+        return {"median": float("nan"), "p95": float("nan"), "max": float("nan")}
+    return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95)), "max": float(np.max(values))}
+
+
+def _source_timing(episodes: list[dict]) -> dict:
+    """``{key: {median, p95, max}}`` of what sources reported (``server_infer_ms``, ``policy_infer_ms``)."""
+    keys = sorted({k for e in episodes for k in e.get("source_timing_ms", {}) if k != "round_trip_ms"})
+    return {k: _median_p95_max([x for e in episodes for x in e.get("source_timing_ms", {}).get(k, [])]) for k in keys}
 
 
 def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
@@ -224,6 +240,8 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),
         "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
         "policy_latency_ms": _median_p99([x for e in episodes for x in e.get("plan_ms", [])]),
+        "round_trip_ms": _median_p95_max([x for e in episodes for x in e.get("plan_ms", [])]),
+        **_source_timing(episodes),
         "realtime_factor": float(np.mean([e["realtime_factor"] for e in episodes])),
         "measurements_lost_rate": (float(sum(e.get("measurements_lost", 0) for e in episodes)
                                          / max(1, sum(e.get("measurements", 0) for e in episodes)))),

@@ -33,6 +33,8 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
     ("real-time factor", "realtime_factor", "{:.1f}x"),
     ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),
+    ("  round trip p95 / max [ms]", ("round_trip_ms.p95", "round_trip_ms.max"), "{:.1f} / {:.1f}"),
+    ("  server infer [ms]", "server_infer_ms.median", "{:.1f}"),
     ("jumps recovered <1 s", "jump_recovered_rate", "{:.0%}"),
     ("reaction to a change [s]", "reaction_s", "{:.2f}"),
     ("reach after a change [s]", "reach_after_change_s", "{:.2f}"),
@@ -53,7 +55,8 @@ def _get(summary: dict, key):
 
 def _fmt(value, fmt: str) -> str:
     if isinstance(value, tuple):
-        return "-" if any(v is None for v in value) else fmt.format(*value)
+        bad = any(v is None or (isinstance(v, float) and math.isnan(v)) for v in value)
+        return "-" if bad else fmt.format(*value)
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"
     if fmt == "ci":

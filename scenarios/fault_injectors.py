@@ -161,6 +161,13 @@ class FaultySource:
         return self._inner.needs_image
 
     @property
+    def declared_capabilities(self) -> frozenset[str]:
+        """The wrapped source's (it inpaints only if that one does)."""
+        from mmact_ctrl.sources.contract import capabilities
+
+        return capabilities(self._inner)
+
+    @property
     def chunk_dt_s(self) -> float:
         return self._inner.chunk_dt_s
 

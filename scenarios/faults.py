@@ -29,6 +29,7 @@ import numpy as np
 
 from mmact_ctrl.config import MODES
 from scenarios.fault_injectors import FAULTS, FaultSpec
+from scenarios.sources import source_spec_arg
 
 PROG = "python -m scenarios.faults"
 SOURCES: tuple[str, ...] = ("expert", "policy")
@@ -106,8 +107,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="faults to inject (default: all)")
     p.add_argument("--modes", nargs="+", type=_choice("mode", MODES), default=None, metavar="MODE",
                    help=f"execution modes (default: all: {' '.join(MODES)})")
-    p.add_argument("--sources", nargs="+", type=_choice("source", SOURCES), default=None, metavar="SOURCE",
-                   help="chunk sources: expert (scripted) and/or policy (the shipped learned policy); default both")
+    p.add_argument("--sources", nargs="+", type=source_spec_arg, default=None, metavar="SOURCE",
+                   help="chunk sources: expert (scripted), policy (the shipped learned policy), module.path:factory or "
+                        "file.py:factory (your own), ws://HOST:PORT (a policy server); default expert and policy")
+    p.add_argument("--source", action="append", type=source_spec_arg, default=None, metavar="SOURCE",
+                   help="one more chunk source, as in moving_target and the sweep (repeatable; joins --sources; alone "
+                        "it replaces the default pair)")
+    p.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword setting for the module:factory sources (repeatable; VALUE read as JSON when it parses)")
     p.add_argument("--seeds", type=_number(int, "--seeds", 1), default=None, help="seeds per cell (default 3, 1 with --quick)")
     p.add_argument("--seed", type=_number(int, "--seed", 0), default=0, help="first seed")
     p.add_argument("--target", choices=TARGET_KINDS, default="static",
@@ -131,26 +138,33 @@ def build_parser() -> argparse.ArgumentParser:
 _CACHE: dict = {}
 
 
-def _world(source: str, target: str, speed: float):
-    from scenarios.factory import make_world, policy_scene
+def _source_key(spec: str, args: dict | None) -> tuple:
+    return ("source", spec, json.dumps(args or {}, sort_keys=True))
 
-    key = ("world", source, target, speed)
-    if key not in _CACHE:
-        extra = policy_scene(_source("policy")) if source == "policy" else {"n_objects": 2}
+
+def _world(source: str, target: str, speed: float, source_args: dict | None = None):
+    from scenarios.factory import make_world
+    from scenarios.sources import scene_settings
+
+    key = ("world", _source_key(source, source_args), target, speed)
+    if key not in _CACHE:  # any source but the expert: the scenes it asks for (our policy's plane and cameras)
+        extra = {"n_objects": 2, **(scene_settings(_source(source, source_args)) if source != "expert" else {})}
         _CACHE[key] = make_world(target, speed, **extra)
     return _CACHE[key]
 
 
-def _source(source: str):
-    if source == "policy":
-        if "policy" not in _CACHE:  # loaded once per process
-            from mmact_ctrl.policy_source import PolicyChunkSource
+def _source(source: str, source_args: dict | None = None):
+    """The cell's chunk source (``scenarios.sources``): a fresh expert, any other built once per process."""
+    from scenarios.sources import SourceSettings, build_source
 
-            _CACHE["policy"] = PolicyChunkSource()
-        return _CACHE["policy"]
-    from scenarios.factory import make_expert
+    if source == "expert":
+        from scenarios.factory import make_expert
 
-    return make_expert()
+        return make_expert()
+    key = _source_key(source, source_args)
+    if key not in _CACHE:
+        _CACHE[key] = build_source(SourceSettings(spec=source, args=dict(source_args or {})))
+    return _CACHE[key]
 
 
 def _model():
@@ -204,8 +218,8 @@ def run_cell(cell: dict, keep_log: bool = False):
     log = None
     t0 = time.perf_counter()
     try:
-        world = _world(cell["source"], cell["target"], cell["speed"])
-        source = _source(cell["source"])
+        world = _world(cell["source"], cell["target"], cell["speed"], cell.get("source_args"))
+        source = _source(cell["source"], cell.get("source_args"))
         controller = HybridController(StackConfig(mode=cell["mode"], duration_s=cell["duration_s"]), model=_model())
         start, end = spec.window_s(controller.config.dt_s)
         row.update(fault_start_s=start, fault_end_s=end)
@@ -233,9 +247,14 @@ def run_cell(cell: dict, keep_log: bool = False):
 
 
 def make_cells(args) -> list[dict]:
+    """Every fault x mode x source x seed, but the modes a source cannot serve (``args.unservable``: source ->
+    modes, e.g. inpaint for a source without ``plan_inpaint``)."""
+    extra = {"source_args": args.source_args} if getattr(args, "source_args", None) else {}
+    skip = getattr(args, "unservable", {}) or {}
     return [dict(fault=f, mode=m, source=s, seed=args.seed + i, target=args.target, speed=args.speed,
-                 duration_s=args.duration_s, onset_s=args.onset_s)
-            for s in args.sources for f in args.faults for m in args.modes for i in range(args.seeds)]
+                 duration_s=args.duration_s, onset_s=args.onset_s, **(extra if s not in SOURCES else {}))
+            for s in args.sources for f in args.faults for m in args.modes if m not in skip.get(s, ())
+            for i in range(args.seeds)]
 
 
 def run_suite(cells: list[dict], workers: int = 1, quiet: bool = False) -> list[dict]:
@@ -512,15 +531,47 @@ def _json_safe(value):
     return value
 
 
+def _unservable(args) -> tuple[dict[str, tuple[str, ...]], list[str]]:
+    """Per foreign source, the requested modes it cannot serve (checked on a probe built here, so a bad plugin is
+    one line before any work), and a note for the report on each."""
+    from mmact_ctrl.executors import make_executor
+    from mmact_ctrl.sources.contract import SourceError, require_capabilities
+    from scenarios.sources import SourceSettings, build_source, close_source
+
+    skip, notes = {}, []
+    for spec in args.sources:
+        if spec in SOURCES:
+            continue
+        probe = build_source(SourceSettings(spec=spec, args=dict(args.source_args)))
+        try:
+            for mode in args.modes:
+                try:
+                    require_capabilities(probe, make_executor(mode).needs, mode)
+                except SourceError as exc:
+                    skip.setdefault(spec, ())
+                    skip[spec] += (mode,)
+                    notes.append(f"--mode {mode} left out for {spec}: {exc}")
+        finally:
+            close_source(probe)
+    return skip, notes
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     args.faults = list(dict.fromkeys(args.faults or FAULTS))
     args.modes = list(dict.fromkeys(args.modes or MODES))
-    if args.sources is None:
+    if args.sources is None and not args.source:
         args.sources = list(QUICK_SOURCES if args.quick else SOURCES)
-    args.sources = list(dict.fromkeys(args.sources))
+    args.sources = list(dict.fromkeys((args.sources or []) + (args.source or [])))
+    try:
+        from mmact_ctrl.sources.loader import parse_source_args
+
+        args.source_args = parse_source_args(args.source_arg)
+        args.unservable, notes = _unservable(args)
+    except (ValueError, OSError, RuntimeError) as exc:  # a bad plugin, a server that is down: one line
+        parser.error(str(exc).splitlines()[0])
     if args.seeds is None:
         args.seeds = QUICK_SEEDS if args.quick else 3
     if args.duration_s is None:
@@ -590,6 +641,7 @@ def main(argv: list[str] | None = None) -> int:
           f"- {'static target' if args.target == 'static' else f'{args.target} target at {args.speed:g} m/s'}, two balls, {args.duration_s:g} s episodes, fault onset "
           f"{args.onset_s:g} s, seeds {args.seed}..{args.seed + args.seeds - 1}, workers {args.workers}",
           f"- sources: {', '.join(args.sources)}; modes: {', '.join(args.modes)}",
+          *[f"- {n}" for n in notes],
           "",
           "Cell: success rate over the seeds; `V`n: safety violations (ticks flagged by the monitor, every kind); "
           "`R`n: exceptions that escaped `run_episode`; `A`n: aborted episodes (20 missed ticks in a row: expected for "
@@ -613,6 +665,8 @@ def main(argv: list[str] | None = None) -> int:
         md.append(f"| `{f}` | {FAULTS[f].description} | {window} |")
     (out / "report.md").write_text("\n".join(md) + "\n")
 
+    for n in notes:
+        print(n)
     for src in args.sources:
         print(f"\n{src} source (success rate; V violations, R raised, A aborts):\n")
         print(tables[src])

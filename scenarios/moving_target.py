@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -25,12 +26,21 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
+from policy.checkpoint import CheckpointError
 from scenarios.targets import KINDS as TARGET_KINDS
 from scenarios.expert import LEADS
-from scenarios.factory import POLICY_PLANE_Z_M, make_expert, make_world, policy_scene
+from mmact_ctrl.executors import make_executor
+from mmact_ctrl.sources.action_space import GRIPPERS, KINDS as ACTION_KINDS
+from mmact_ctrl.sources.contract import require_capabilities
+from scenarios.factory import POLICY_PLANE_Z_M, make_world
+from scenarios.sources import build_source, close_source, scene_settings, settings_from_args, source_spec_arg
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
+#: the fastest target any arm here can follow: the Panda's TCP speed limit, m/s
+MAX_SPEED_M_S = 1.7
+#: the fastest replanning that means anything: the slow loop at the target channel's rate, Hz
+MAX_REPLAN_HZ = 100.0
 
 
 class _OneLineErrorParser(argparse.ArgumentParser):
@@ -76,25 +86,61 @@ def _latency(text: str):
     return _number(float, "--latency-ms", 0)(text)
 
 
+EPILOG = """examples:
+  python -m scenarios.moving_target                                   # the shipped policy, open_loop vs hybrid, linear target
+  python -m scenarios.moving_target --source expert --target reversal --replan-hz 5
+  python -m scenarios.moving_target --source examples/byo_source.py:make_source --mode hybrid
+  python -m scenarios.moving_target --source my_pkg.policies:make --source-arg horizon=50 --source-arg dt_s=0.05
+  python -m scenarios.serve --source policy --port 8000 &            # a policy in another process ...
+  python -m scenarios.moving_target --source ws://127.0.0.1:8000 --latency-ms measured   # ... driving the stack
+  python -m scenarios.moving_target --mode hybrid --target jump --json out/run.json --plot out/run.png
+"""
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Examples kept as written; a default printed once (not where the help already says it, nor None/False)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text.lower() or action.default in (None, False, [], argparse.SUPPRESS):
+            return text
+        return super()._get_help_string(action)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _OneLineErrorParser(
         prog=PROG,
-        description=(
-            "Drive the MuJoCo Panda toward a moving target with an action-chunk source (the scripted expert, whose "
-            "chunks go through the same action tokenizer as a token policy) and measure how much the 1 kHz control "
-            "layer (Kalman filter + chunk retargeting + Ruckig + task-space QP) buys back over executing each chunk "
-            "open-loop."
-        ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        description=textwrap.fill(
+            "Drive the MuJoCo Panda toward a moving target with an action-chunk source (by default the shipped "
+            "unified-token policy; or the scripted expert, your own Python source, or a policy server speaking "
+            "openpi's protocol) and measure how much the 1 kHz control layer (Kalman filter + chunk retargeting + "
+            "Ruckig + MPC + task-space QP) buys back over executing each chunk open-loop and over the field's fixes.",
+            width=100),
+        epilog=EPILOG,
+        formatter_class=_HelpFormatter,
     )
     src = p.add_argument_group("chunk source")
-    src.add_argument("--source", choices=("policy", "expert"), default=DEFAULT_SOURCE,
+    src.add_argument("--source", type=source_spec_arg, default=DEFAULT_SOURCE, metavar="SOURCE",
                      help="policy: the shipped unified-token policy looks at the camera and reads the instruction; "
-                          "expert: the scripted expert sees the target where one frame shows it")
+                          "expert: the scripted expert (by default it leads the target from two frames, see "
+                          "--expert-lead); module.path:factory or path/file.py:factory: your own source (README, "
+                          "'Bring your own policy'); ws://HOST:PORT: a policy server speaking openpi's protocol "
+                          "(python -m scenarios.serve, or any openpi server). Default: policy")
+    src.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
+                     help="a keyword setting for a module:factory source (repeatable; VALUE is read as JSON when it "
+                          "parses, else as a string)")
+    src.add_argument("--obs-mapping", metavar="NAME|PATH", default=None,
+                     help="ws:// source: which observation keys carry images, state and prompt: mmact (ours), libero, "
+                          "droid, or a JSON mapping file (default: what the server declares, else mmact)")
+    src.add_argument("--action-space", choices=ACTION_KINDS, default=None,
+                     help="ws:// source: what the server's actions are (default: what it declares, else tcp_pose)")
+    src.add_argument("--gripper", choices=GRIPPERS, default=None,
+                     help="ws:// source: the gripper convention of its actions' last value (default: what it declares, "
+                          "else width_m)")
     src.add_argument("--expert-lead", choices=LEADS, default="velocity",
                      help="expert: velocity = it sees two frames (t0 - 0.1 s and t0), estimates the target's velocity and "
                           "aims each waypoint where the target will be at that waypoint's time (latency included); "
-                          "none = it aims where the target is in the frame at t0 (a single-frame policy)")
+                          "none = it aims where the target is in the frame at t0 (a single-frame policy). Default: velocity")
     src.add_argument("--checkpoint", metavar="PATH", default=None,
                      help="policy checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
     src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=1,
@@ -130,8 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "along its path, so a chunk that aims beside the ball does not push the arm off it; none")
     g.add_argument("--trust-radius-m", type=_number(float, "--trust-radius-m", 0, False), default=0.3,
                    help="retargeting only applies when the target is within this distance of the chunk's aim")
-    g.add_argument("--replan-hz", type=_number(float, "--replan-hz", 0, False), default=1.0,
-                   help="how often the chunk source is queried (Hz)")
+    g.add_argument("--replan-hz", type=_number(float, "--replan-hz", 0, False, MAX_REPLAN_HZ), default=1.0,
+                   help=f"how often the chunk source is queried (Hz; the slow loop: at most {MAX_REPLAN_HZ:g}, the "
+                        "target channel's rate)")
     g.add_argument("--latency-ms", type=_latency, default=200.0,
                    help="inference latency: a chunk observed at t0 becomes active at t0 + latency; 'measured' uses each "
                         "chunk's measured inference time")
@@ -143,20 +190,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "executed is rejected and counted; the previous chunk keeps running")
     g.add_argument("--bins", type=_number(int, "--bins", 0), default=2048,
                    help="action bins per dimension of the tokenizer (0 = no quantization)")
-    g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=16, help="waypoints per chunk (H)")
-    g.add_argument("--chunk-dt-s", type=_number(float, "--chunk-dt-s", 0, False), default=0.1, help="waypoint spacing (s)")
+    g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=16, help="expert: waypoints per chunk (H)")
+    g.add_argument("--chunk-dt-s", type=_number(float, "--chunk-dt-s", 0, False), default=None,
+                   help="expert (and a ws:// server that does not declare it): waypoint spacing, s (default 0.1)")
     w = p.add_argument_group("world")
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
     w.add_argument("--plane-z-m", type=_plane, default="auto",
                    help="objects at this height (+ up to 2 cm) moving horizontally, as in the policy's training scenes; "
                         f"0 = the full 3-D workspace; auto = the checkpoint's training plane with --source policy ({POLICY_PLANE_Z_M} "
                         "for the shipped one), 0 with --source expert")
-    w.add_argument("--objects", type=int, choices=(1, 2), default=2,
-                   help="objects in the scene (two differently coloured balls: the instruction names one)")
+    w.add_argument("--objects", type=int, choices=(1, 2), default=None,
+                   help="objects in the scene (two differently coloured balls: the instruction names one; default: "
+                        "the source's scene, else 2)")
     w.add_argument("--instruction", metavar="TEXT", default=None,
                    help="a fixed instruction for every episode, naming one object by colour (default: a random "
                         "phrasing naming a random object per episode)")
-    w.add_argument("--speed", type=_number(float, "--speed", 0), default=0.2, help="target speed (m/s)")
+    w.add_argument("--speed", type=_number(float, "--speed", 0, True, MAX_SPEED_M_S), default=0.2,
+                   help=f"target speed (m/s; at most {MAX_SPEED_M_S:g}, the Panda's TCP speed limit: no arm follows a "
+                        "faster target)")
     w.add_argument("--noise-m", type=_number(float, "--noise-m", 0), default=0.002,
                    help="standard deviation of the 100 Hz target measurement noise (m)")
     w.add_argument("--dropout", type=_number(float, "--dropout", 0, True, 0.99), default=0.1,
@@ -236,11 +287,32 @@ def make_sensor(args: argparse.Namespace, world, dt_s: float):
 
 
 def make_source(args: argparse.Namespace, world=None):
-    if args.source == "policy":
-        from mmact_ctrl.policy_source import PolicyChunkSource
+    """The chunk source of ``--source`` (``scenarios.sources``)."""
+    return build_source(settings_from_args(args), world)
 
-        return PolicyChunkSource(args.checkpoint, action_steps=args.action_steps, refine_bins=args.refine_bins)
-    return make_expert(bins=args.bins, horizon=args.horizon, dt_s=args.chunk_dt_s, lead=args.expert_lead, world=world)
+
+def make_source_and_world(args: argparse.Namespace):
+    """The source and the world it runs in: the expert's world is built first (it reads its workspace); any other
+    source first, and its world with the scene it asks for (our policy's cameras and training plane, a foreign
+    source's cameras), ``--plane-z-m`` / ``--objects`` overriding."""
+    settings = settings_from_args(args)
+    settings.check()
+    world_kw = dict(noise_m=args.noise_m, dropout=args.dropout, instruction=args.instruction)
+    if settings.kind == "expert":
+        plane_z_m = 0.0 if args.plane_z_m == "auto" else args.plane_z_m
+        world = make_world(args.target, args.speed, n_objects=args.objects or 2, plane_z_m=plane_z_m, **world_kw)
+        return build_source(settings, world), world
+    source = build_source(settings)
+    try:
+        scene = scene_settings(source)
+        plane = scene.pop("plane_z_m", 0.0)
+        objects = scene.pop("n_objects", 2)
+        world = make_world(args.target, args.speed, n_objects=args.objects or objects,
+                           plane_z_m=plane if args.plane_z_m == "auto" else args.plane_z_m, **scene, **world_kw)
+    except BaseException:
+        close_source(source)
+        raise
+    return source, world
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -248,20 +320,18 @@ def run(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
-    if args.source == "policy":  # the policy's scenes: its cameras, its training plane
-        source = make_source(args)
-        scene = policy_scene(source)
-        plane_z_m = scene["plane_z_m"] if args.plane_z_m == "auto" else args.plane_z_m
-        world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
-                           plane_z_m=plane_z_m, instruction=args.instruction, cameras=scene["cameras"])
-    else:
-        plane_z_m = 0.0 if args.plane_z_m == "auto" else args.plane_z_m
-        world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout, n_objects=args.objects,
-                           plane_z_m=plane_z_m, instruction=args.instruction)
-        source = make_source(args, world)
+    source, world = make_source_and_world(args)
+    try:  # a mode that needs what the source cannot do (inpainting): one line now, not a silent episode later
+        for mode in configs:
+            require_capabilities(source, make_executor(mode).needs, mode)
+    except ValueError:
+        close_source(source)
+        world.close()
+        raise
     try:
         sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
     except ValueError:
+        close_source(source)
         world.close()
         raise
     runs: dict[str, dict] = {}
@@ -292,11 +362,13 @@ def run(args: argparse.Namespace) -> dict:
     finally:
         bar.close()
         getattr(sensor, "close", lambda: None)()
+        close_source(source)
         world.close()
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
-                   "target_spec": dataclasses.asdict(world.target),
+                   "target_spec": dataclasses.asdict(world.target), "objects": int(world.n_objects),
+                   "cameras": list(world.scene.camera_names),
                    "refine_bins_used": getattr(source, "refine_bins", None)},
         "summary": runs[last]["summary"],
         "episodes": runs[last]["episodes"],
@@ -313,15 +385,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         t0 = time.perf_counter()
         payload = run(args)
-    except (ValueError, FileNotFoundError) as exc:  # bad configuration, a missing checkpoint: one clear line
-        parser.error(str(exc))
+    except (ValueError, FileNotFoundError, CheckpointError, ConnectionError, TimeoutError) as exc:
+        # bad configuration, a missing or unreadable checkpoint, a server that is down: one clear line
+        parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     logs = payload.pop("_logs")
     # a static target has no speed: printing --speed's default next to it read as if it moved
     target_desc = "static target" if args.target == "static" else f"{args.target} target at {args.speed:g} m/s"
     latency = args.latency_ms if args.latency_ms == "measured" else f"{args.latency_ms:g}"
-    run_desc = (f"{args.source} source, {args.objects} object(s), {target_desc}, replan {args.replan_hz:g} Hz, "
+    run_desc = (f"{args.source} source, {payload['config']['objects']} object(s), {target_desc}, replan {args.replan_hz:g} Hz, "
                 f"latency {latency} ms, {args.bins or 'no'} bins")  # one description: table header and plot title
-    if args.source == "policy":
+    if args.source == "policy":  # our policy in this process
         w = payload["config"]["refine_bins_used"]
         passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"
         run_desc += f" (policy: {passes}, {'refine +-' + str(w) + ' bins' if w else 'bin centres'})"

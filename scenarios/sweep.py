@@ -42,6 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from mmact_ctrl.config import MODES
+from mmact_ctrl.executors import make_executor
+from mmact_ctrl.sources.contract import SourceError, require_capabilities
+from scenarios.sources import build_source, close_source, settings_from_args, source_spec_arg
 
 AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception",
                          "lead", "d_steps", "s_steps")
@@ -145,7 +148,8 @@ def cell_key(cell: dict, duration_s: float) -> str:
     text = json.dumps({**{k: cell.get(k) for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
                        **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
-                          if cell.get("source", "expert") != "expert" else {})}, sort_keys=True)
+                          if cell.get("source", "expert") != "expert" else {}),
+                       **({"source_args": cell["source_args"]} if cell.get("source_args") else {})}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -154,44 +158,57 @@ def cell_key(cell: dict, duration_s: float) -> str:
 _CACHE: dict = {}
 
 
+def _source_and_world(cell: dict):
+    """The cell's chunk source and world, built once per process (``scenarios.sources``): the expert with the cell's
+    bins and lead in a world of the cell's motion; any other source (our policy, ``module:factory``, ``ws://``) in
+    the scenes it asks for."""
+    from scenarios.factory import make_expert, make_world
+    from scenarios.sources import SourceSettings, build_source, scene_settings
+
+    spec = cell.get("source", "expert")
+    if spec == "expert":
+        wkey = ("world", cell["target"], cell["speed_m_s"], spec)
+        if wkey not in _CACHE:
+            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+        world = _CACHE[wkey]
+        return make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=world), world
+    skey = ("source", spec, json.dumps(cell.get("source_args") or {}, sort_keys=True), cell.get("checkpoint"))
+    if skey not in _CACHE:
+        _CACHE[skey] = build_source(SourceSettings(spec=spec, args=dict(cell.get("source_args") or {}),
+                                                   checkpoint=cell.get("checkpoint") or None))
+    source = _CACHE[skey]
+    wkey = ("world", cell["target"], cell["speed_m_s"], skey)
+    if wkey not in _CACHE:  # the source's scenes (our policy's: two balls, its cameras and training plane)
+        scene = {"n_objects": 2, **scene_settings(source)}
+        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **scene)
+    return source, _CACHE[wkey]
+
+
 def run_cell(cell: dict, duration_s: float) -> dict:
     """One episode for one grid cell; returns the row (axes + episode metrics)."""
     from mmact_ctrl.config import StackConfig
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
     from mmact_ctrl.metrics import episode_metrics
-    from scenarios.factory import make_expert, make_world, policy_scene
 
-    source_name = cell.get("source", "expert")
-    if source_name == "policy" and "policy" not in _CACHE:
-        from mmact_ctrl.policy_source import PolicyChunkSource
-
-        _CACHE["policy"] = PolicyChunkSource(cell.get("checkpoint") or None)
-    wkey = ("world", cell["target"], cell["speed_m_s"], source_name)
-    if wkey not in _CACHE:  # the policy's scenes: two balls, its cameras and training plane (as in scenarios.collect)
-        scene = policy_scene(_CACHE["policy"]) if source_name == "policy" else {}
-        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **scene)
-    if source_name == "policy":
-        source = _CACHE["policy"]
-    else:
-        source = make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=_CACHE[wkey])
+    source, world = _source_and_world(cell)
     if "model" not in _CACHE:
         from controllers.robot_model import PandaModel
 
         _CACHE["model"] = PandaModel()
     sensor = None
     if cell.get("perception", "oracle") == "camera":  # the ball measured in rendered frames (30 Hz, 50 ms)
-        skey = ("camera", wkey)
+        skey = ("camera", id(world))
         if skey not in _CACHE:
             from scenarios.camera_sensor import CameraSensor, CameraSensorConfig
 
-            _CACHE[skey] = CameraSensor(_CACHE[wkey], CameraSensorConfig())
+            _CACHE[skey] = CameraSensor(world, CameraSensorConfig())
         sensor = _CACHE[skey]
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
                       duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0,
                       receding_k=int(cell.get("s_steps") or 0))
     controller = HybridController(cfg, model=_CACHE["model"])
-    log = run_episode(_CACHE[wkey], source, controller, seed=cell["seed"], sensor=sensor)
+    log = run_episode(world, source, controller, seed=cell["seed"], sensor=sensor)
     m = episode_metrics(log)
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)
@@ -266,9 +283,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
                                                   "speed_m_s, bins, seeds[, perception, lead, d_steps, s_steps]}) instead "
                                                   "of the default grid")
-    p.add_argument("--source", choices=("expert", "policy"), default="expert",
-                   help="chunk source of every cell: the scripted expert, or the learned policy (two balls at one "
-                        "height, as in its training scenes; bins are then the policy's own)")
+    p.add_argument("--source", type=source_spec_arg, default="expert", metavar="SOURCE",
+                   help="chunk source of every cell: expert (the scripted expert, default), policy (the learned policy "
+                        "in its training scenes; bins are then its own), module.path:factory or file.py:factory (your "
+                        "own source, README 'Bring your own policy'), or ws://HOST:PORT (a policy server speaking "
+                        "openpi's protocol). Every source but the expert has no lead axis and no bins study")
+    p.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword setting for a module:factory source (repeatable; VALUE read as JSON when it parses)")
     p.add_argument("--checkpoint", default=None, help="policy checkpoint (default: the shipped one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -301,23 +322,41 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = [c for s in studies for c in s.cells()]
-    if args.source == "policy":
-        from policy.inference import DEFAULT_CHECKPOINT
+    try:
+        settings = settings_from_args(args)
+        settings.check()
+        notes: list[str] = []
+        if settings.kind != "expert":  # fail here, in one line, not in every worker
+            probe = build_source(settings)
+            try:  # the modes this source cannot serve are left out, and the report says so
+                for mode in sorted({c["mode"] for c in cells}):
+                    try:
+                        require_capabilities(probe, make_executor(mode).needs, mode)
+                    except SourceError as exc:
+                        notes.append(f"--mode {mode} left out: {exc}")
+                        cells = [c for c in cells if c["mode"] != mode]
+            finally:
+                close_source(probe)
+    except (ValueError, OSError, RuntimeError) as exc:
+        p.error(str(exc).splitlines()[0])
+    if settings.kind != "expert":
+        ckpt = None
+        if settings.kind == "policy":
+            from policy.inference import DEFAULT_CHECKPOINT
 
-        ckpt = args.checkpoint or str(DEFAULT_CHECKPOINT)
-        if not Path(ckpt).is_file():
-            p.error(f"policy checkpoint {ckpt!r} does not exist")
-        # the policy's own chunks: no expert lead axis (one cell per lead-free condition)
-        seen, policy_cells = set(), []
+            ckpt = args.checkpoint or str(DEFAULT_CHECKPOINT)
+        # a source's own chunks: no expert lead axis (one cell per lead-free condition), no bins study
+        seen, own_cells = set(), []
         for c in cells:
             if c["study"] == "bins":
                 continue
-            c = {**c, "source": "policy", "checkpoint": ckpt, "lead": "-"}
+            c = {**c, "source": args.source, "checkpoint": ckpt, "lead": "-",
+                 **({"source_args": settings.args} if settings.args else {})}
             key = cell_key(c, duration_s) + c["study"]
             if key not in seen:
                 seen.add(key)
-                policy_cells.append(c)
-        cells = policy_cells
+                own_cells.append(c)
+        cells = own_cells
     else:
         cells = [{**c, "source": "expert"} for c in cells]
     todo, rows = [], []
@@ -344,7 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     write_csv(rows, out / "results.csv")
     from scenarios.sweep_report import write_report
 
-    write_report(rows, out, wall_s=time.perf_counter() - t0, resumed=len(cells) - len(todo))
+    write_report(rows, out, wall_s=time.perf_counter() - t0, resumed=len(cells) - len(todo), notes=notes)
+    for n in notes:
+        print(n)
     print(f"{len(rows)} episodes ({len(cells) - len(todo)} resumed) -> {out / 'results.csv'}, {out / 'report.md'}")
     return 0
 

@@ -149,12 +149,15 @@ def _nothing_section(rows: list[dict], comps: list[dict]) -> list[str]:
     return parts
 
 
-def write_report(rows: list[dict], out: Path, wall_s: float, resumed: int = 0) -> None:
-    """Write ``out/report.md`` and the PNGs it links."""
+def write_report(rows: list[dict], out: Path, wall_s: float, resumed: int = 0, notes: list[str] | None = None) -> None:
+    """Write ``out/report.md`` and the PNGs it links; ``notes`` are printed under the header (e.g. modes the source
+    could not run)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = [normalize(r) for r in rows]
     parts = _header(rows, wall_s, resumed)
+    if notes:
+        parts += [f"- {n}" for n in notes] + [""]
     for study in study_names(rows):
         parts += _study_section(rows, study, out)
     paired, comps = _paired_section(rows)

@@ -118,6 +118,12 @@ class _RecordingSources:
     def __getattr__(self, name):
         return getattr(self._source, name)
 
+    @property
+    def declared_capabilities(self) -> frozenset[str]:
+        from mmact_ctrl.sources.contract import capabilities
+
+        return capabilities(self._source)
+
     def _keep(self, chunk):
         self.chunks.append((float(chunk.t0_s), int(chunk.horizon), float(chunk.dt_s)))
         return chunk

@@ -69,6 +69,9 @@ class ChunkExecutor(Protocol):
     name: str
     #: the control layers that run under it.
     layers: Layers
+    #: the optional source capabilities it needs (``mmact_ctrl.sources.contract.CAPABILITIES``), checked before an
+    #: episode starts: a source without them is refused in one line, never run into a silent episode.
+    needs: frozenset[str]
 
     def bind(self, controller: "HybridController") -> None:
         """Called once by the controller that runs this executor (gives access to its config, model, estimator)."""
@@ -132,6 +135,7 @@ class ClockedExecutor:
 
     name = "clocked"
     layers = Layers()
+    needs: frozenset[str] = frozenset()
 
     def __init__(self) -> None:
         self.controller: "HybridController | None" = None

@@ -29,6 +29,7 @@ class InpaintExecutor(ClockedExecutor):
     """Asks the source to inpaint around the committed prefix."""
 
     name = "inpaint"
+    needs = frozenset({"inpaint"})
 
     def request(self, source: ChunkSource, observation: Observation, ctx: QueryContext) -> Callable[[], ActionChunk]:
         prefix = known_prefix(ctx.scheduled, ctx.t_s, ctx.latency_s, getattr(source, "chunk_dt_s", None))

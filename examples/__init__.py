@@ -1,0 +1,1 @@
+"""Example chunk sources for ``--source examples.<module>:<factory>`` (README, "Bring your own policy")."""
