@@ -32,7 +32,7 @@ def _strings(path: Path) -> set[str]:
     return {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs}
 
 
-@pytest.mark.parametrize("module", ["mmact_ctrl/loop.py", "mmact_ctrl/controller.py"])
+@pytest.mark.parametrize("module", ["mmact_ctrl/loop.py", "mmact_ctrl/runner.py", "mmact_ctrl/controller.py"])
 def test_loop_and_controller_name_no_mode(module):
     named = _strings(ROOT / module) & set(EXECUTORS)
     assert not named, f"{module} branches on mode names {named}"
