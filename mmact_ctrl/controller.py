@@ -3,6 +3,7 @@ residual) -> (Ruckig) -> (MPC) -> QP -> torques."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,6 +19,7 @@ from controllers.tick_kernels import sample_plan_task
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.executors import ChunkExecutor, make_executor
+from mmact_ctrl.mpc_worker import InlineMPC
 from mmact_ctrl.reference import ChunkReference
 
 GRIPPER_OPEN_M = 0.08
@@ -69,7 +71,12 @@ class HybridController:
         smoother_dt_s = 1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s
         self.smoother = TaskSpaceSmoother(replace(config.smoother, dt_s=smoother_dt_s))
         self.filter = TargetEstimator(replace(config.filter, dt_s=1.0 / config.perception_hz))
-        self.mpc = TaskSpaceMPC(config.mpc, q_nominal_rad=self.model.home_q_rad) if self.use_mpc else None
+        # the MPC object never discards a slow solve itself: lateness is the worker's to judge (in real time, a plan
+        # that arrives later than config.mpc.max_solve_ms; in simulated time none: results must not depend on load)
+        self.mpc = (TaskSpaceMPC(replace(config.mpc, max_solve_ms=math.inf), q_nominal_rad=self.model.home_q_rad)
+                    if self.use_mpc else None)
+        self.mpc_worker = InlineMPC(self.mpc) if self.mpc is not None else None
+        self.offpath_us = 0.0  # time this tick spent on work that runs beside the 1 kHz path on a robot (the MPC)
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
         self._plan: MPCPlan | None = None
@@ -121,8 +128,8 @@ class HybridController:
         self._plan = None
         self._prev_plan = None
         self._next_mpc_s = 0.0
-        if self.mpc is not None:  # keep the built problem (0.3 s to build), forget the episode
-            self.mpc.reset()
+        if self.mpc_worker is not None:  # keep the built problem (0.3 s to build), forget the episode
+            self.mpc_worker.reset()
         self.active = None
         self.terms = None
         self.executor.reset()
@@ -274,16 +281,24 @@ class HybridController:
             self.plan_resyncs += 1
         return q_rad, dq_rad_s, terms.pos_m, terms.rot, terms.J
 
-    def _solve_mpc(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms, rot_des: np.ndarray) -> MPCPlan:
-        """Preview the reference over the MPC horizon (retargeted chunk, predicted target, and the
-        Ruckig offset still to be smoothed away) and plan within the joint limits, from :meth:`_plan_start`."""
+    def use_mpc_worker(self, worker) -> None:
+        """Solve the MPC with ``worker`` (``mmact_ctrl.mpc_worker``: :class:`ThreadedMPC` in real time) instead of
+        inline; the previous worker is closed."""
+        if self.mpc_worker is not None and self.mpc_worker is not worker:
+            self.mpc_worker.close()
+        self.mpc_worker = worker
+
+    def _mpc_problem(self, t_s: float, q_rad, dq_rad_s, terms: RobotTerms, rot_des: np.ndarray) -> tuple:
+        """The arguments of ``TaskSpaceMPC.solve`` after ``t_s``: preview the reference over the MPC horizon
+        (retargeted chunk, predicted target, and the Ruckig offset still to be smoothed away), from
+        :meth:`_plan_start` (copies: a worker thread may solve it while the loop goes on)."""
         taus = self._mpc_taus
         preview = self.reference_positions(t_s + taus)
         if self.smoothing and self.config.smoother.relative:
             preview = preview + self.smoother.preview_pos_offset(taus)
             preview[:, 2] = np.maximum(preview[:, 2], self.config.tcp_floor_m)
         q0, dq0, pos0, rot0, jac0 = self._plan_start(t_s, q_rad, dq_rad_s, terms)
-        return self.mpc.solve(t_s, q0, dq0, pos0, jac0, preview, orientation_error(rot_des, rot0))
+        return (np.array(q0), np.array(dq0), np.array(pos0), np.array(jac0), preview, orientation_error(rot_des, rot0))
 
     def _smoothed_reference(self, t_s: float):
         """(pos, vel, acc, rot, ang_vel, ang_acc, gripper): the reference after retargeting and Ruckig."""
@@ -309,18 +324,28 @@ class HybridController:
         """
         terms = self.model.terms(q_rad, dq_rad_s)
         self.terms = terms
+        self.offpath_us = 0.0
         if self.use_mpc:
+            worker = self.mpc_worker
             if t_s >= self._next_mpc_s - 1e-9:
                 ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
                 self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
-                self._prev_plan = self._plan
-                self._plan = self._solve_mpc(t_s, q_rad, dq_rad_s, terms, rot)
-                if self._plan.ok:
-                    self._good_plan_end_s = t_s + self.config.mpc_keep_plan_s
+                problem = self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot)
+                n_solved = len(worker.solve_us)
+                worker.submit(t_s, problem)
+                if isinstance(worker, InlineMPC) and len(worker.solve_us) > n_solved:
+                    self.offpath_us = worker.solve_us[-1]  # beside the 1 kHz path on a robot: not the tick's time
                 self._next_mpc_s = t_s + self._mpc_period_s
+            done = worker.poll()
+            if done is not None:  # the newest finished plan takes over
+                t_asked, new_plan = done
+                self._prev_plan = self._plan
+                self._plan = new_plan
+                if new_plan.ok:
+                    self._good_plan_end_s = t_asked + self.config.mpc_keep_plan_s
             t_slow, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._slow_ref
             plan = self._plan
-            if plan.ok or t_s < self._good_plan_end_s:
+            if plan is not None and (plan.ok or t_s < self._good_plan_end_s):
                 q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
                 sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2,
                                  plan.ee_pos_m[0], plan.ee_jacobian_lin, q_post, task)

@@ -20,7 +20,8 @@ class EpisodeLog:
     ``events`` lists ``(t_s, what, detail)`` of every fault handled. ``change_times_s``: when the target's motion
     changed course (``World.target_change_times_s``); ``delay_steps``: per activated chunk, the waypoints of the
     running chunk consumed while it was computed (activation time minus observation time, in chunk steps: the
-    inference delay d of RTC, as it actually ran).
+    inference delay d of RTC, as it actually ran); ``mpc_solve_us``: the wall time of each MPC solve, us (beside the
+    1 kHz path: not in ``tick_us``).
     """
 
     seed: int
@@ -64,6 +65,7 @@ class EpisodeLog:
     plan_resyncs: int = 0
     floor_clamps: int = 0
     mpc_bypass_ticks: int = 0
+    mpc_solve_us: list[float] = field(default_factory=list)
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)
 

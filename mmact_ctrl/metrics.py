@@ -25,6 +25,8 @@
   corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``, ``floor_clamps`` (reference samples raised to the TCP floor above the table), ``mpc_bypass_ticks`` (ticks with
   no good MPC plan, tracking the smoothed reference directly).
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
+- tick_us: the wall time of the 1 kHz path per tick (perception, chunk admission, the controller, the safety check),
+  us; the MPC is solved beside it (``mmact_ctrl.mpc_worker``) and its solves are ``mpc_solve_us`` (median, p99).
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - round_trip_ms: the same calls as median / p95 / max (for a source in another process, the chunk's round trip on the
   wire); server_infer_ms / policy_infer_ms: what a remote source's server reported of its own inference time, ms
@@ -170,6 +172,8 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "clipped_actions": int(log.clipped_actions),
         "tick_us_median": float(np.median(log.tick_us)),
         "tick_us_p99": float(np.percentile(log.tick_us, 99)),
+        "mpc_solve_us_median": float(np.median(log.mpc_solve_us)) if log.mpc_solve_us else float("nan"),
+        "mpc_solve_us_p99": float(np.percentile(log.mpc_solve_us, 99)) if log.mpc_solve_us else float("nan"),
         "plan_ms_median": float(np.median(log.plan_ms)) if log.plan_ms else float("nan"),
         "plan_ms": [float(x) for x in log.plan_ms],
         "source_timing_ms": {k: [float(x) for x in v] for k, v in log.source_timing_ms.items()},
