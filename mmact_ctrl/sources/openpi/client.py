@@ -175,7 +175,8 @@ class PolicyClient:
                 return
             except ServerUnreachable as exc:
                 last = str(exc)
-        raise ServerUnreachable(f"{last} (gave up after {config.connect_tries} tries)")
+        n = config.connect_tries
+        raise ServerUnreachable(f"{last} (gave up after {n} {'try' if n == 1 else 'tries'})")
 
     @property
     def connected(self) -> bool:
