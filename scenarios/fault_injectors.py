@@ -9,6 +9,9 @@ Each fault wraps one part of the stack and leaves everything else untouched:
   the measurements and the log all see it) out of reach, or to the edge of the workspace;
 - the controller's solvers (:func:`_qp_fail_burst`, :func:`_mpc_late`): the real, counted fallback paths are
   forced for a while;
+- the wire (``wire_*``, ``scenarios.wire_faults``): the source served over openpi's protocol on 127.0.0.1, the
+  server raising (an error frame), slow past the client's timeout, answering wrong shapes or NaN, or dying and
+  coming back;
 - the command link (:class:`DroppedTicks`): a :class:`~mmact_ctrl.loop.CommandLink` that drops ticks;
 - the initial state (``start_with_velocity``).
 
@@ -416,6 +419,20 @@ def _source_fault(behaviour: str):
     return build
 
 
+def _wire_fault(behaviour: str):
+    """The source served over openpi's protocol on 127.0.0.1 with the wire failing in the window
+    (``scenarios.wire_faults``); the server stops when the injection is closed."""
+
+    def build(spec, world, source, controller, inj: Injection) -> None:
+        from scenarios.wire_faults import WireServed
+
+        served = WireServed(source, behaviour, inj.window_s, scene={"n_objects": int(getattr(world, "n_objects", 2))})
+        inj.source = served
+        inj._undo.append(served.close)
+
+    return build
+
+
 def _perception_fault(behaviour: str):
     def build(spec, world, source, controller, inj: Injection) -> None:
         inj.world = FaultyPerception(world, behaviour, inj.window_s)
@@ -518,6 +535,15 @@ def _registry() -> dict[str, Fault]:
               _moved_target(UNREACHABLE_POS_M), duration_s=math.inf, unreachable=True),
         Fault("near_singularity", "world", "the ball moves 0.85 m straight out from the shoulder at the onset",
               _moved_target(NEAR_SINGULAR_POS_M), duration_s=math.inf),
+        Fault("wire_error_frame", "wire", "the policy server raises: an error (text) frame, connection closed, for 1.5 s",
+              _wire_fault("error_frame")),
+        Fault("wire_slow", "wire", "the policy server answers after the client's request timeout for 1.5 s",
+              _wire_fault("slow")),
+        Fault("wire_bad_shape", "wire", "the policy server answers actions of the wrong shape for 1.5 s",
+              _wire_fault("bad_shape")),
+        Fault("wire_nan", "wire", "the policy server answers NaN actions for 1.5 s", _wire_fault("nan")),
+        Fault("wire_server_dies", "wire", "the policy server stops at the onset (port closed), back after 1.5 s",
+              _wire_fault("dies")),
     ]
     return {f.name: f for f in faults}
 

@@ -393,7 +393,9 @@ def main(argv: list[str] | None = None) -> int:
     target_desc = "static target" if args.target == "static" else f"{args.target} target at {args.speed:g} m/s"
     latency = args.latency_ms if args.latency_ms == "measured" else f"{args.latency_ms:g}"
     run_desc = (f"{args.source} source, {payload['config']['objects']} object(s), {target_desc}, replan {args.replan_hz:g} Hz, "
-                f"latency {latency} ms, {args.bins or 'no'} bins")  # one description: table header and plot title
+                f"latency {latency} ms")  # one description: table header and plot title
+    if args.source == "expert":  # the expert's chunks go through the action tokenizer; other sources have their own
+        run_desc += f", {args.bins or 'no'} bins"
     if args.source == "policy":  # our policy in this process
         w = payload["config"]["refine_bins_used"]
         passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"

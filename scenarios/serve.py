@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import importlib
 import math
 import signal
 import sys
@@ -90,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="policy (default): the shipped unified-token policy; expert: the scripted expert; "
                         "module.path:factory: a callable returning a chunk source")
     s.add_argument("--source-arg", type=_source_arg, action="append", default=[], metavar="KEY=VALUE",
-                   help="module:factory: a keyword argument of the factory (repeatable)")
+                   help="module:factory: a keyword argument of the factory (repeatable; VALUE read as JSON when it "
+                        "parses, else as a string)")
     s.add_argument("--checkpoint", metavar="PATH", default=None,
                    help="policy: the checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
     s.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=None,
@@ -141,21 +141,6 @@ def _refine_bins(text: str | None) -> int | None:
     return value
 
 
-def _load_source(spec: str, kwargs: dict):
-    """``module.path:factory`` called with ``kwargs``, through ``mmact_ctrl.sources.loader.load_source``."""
-    try:
-        from mmact_ctrl.sources.loader import load_source
-    except ImportError:
-        # TODO(loader.py): mmact_ctrl/sources/loader.py (load_source) is being written; this stand-in goes then
-        module, _, name = spec.partition(":")
-        try:
-            factory = getattr(importlib.import_module(module), name)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(f"--source {spec}: cannot load it ({type(exc).__name__}: {exc})") from None
-        return check_source(factory(**kwargs), f"--source {spec}")
-    return load_source(spec, kwargs)
-
-
 def make_served_source(args: argparse.Namespace):
     """(the chunk source, its scene dict, a one-line description) of the arguments."""
     if args.source == "policy":
@@ -180,7 +165,9 @@ def make_served_source(args: argparse.Namespace):
         cfg = source.config
         return source, scene, (f"scripted expert (lead {lead}, {cfg.horizon} x {cfg.dt_s:g} s, "
                                f"{source.tokenizer.bins if source.tokenizer else 'no'} bins)")
-    source = _load_source(args.source, dict(args.source_arg))
+    from mmact_ctrl.sources.loader import load_source, parse_source_args
+
+    source = load_source(args.source, parse_source_args(f"{k}={v}" for k, v in args.source_arg))
     return source, dict(getattr(source, "scene", None) or scene), f"{args.source}"
 
 

@@ -30,7 +30,8 @@ DURATION_S = 2.0
 SEED = 0
 #: faults of the chunk source: also run open-loop (no filter, no retargeting)
 SOURCE_FAULTS = ("none", "source_raises", "nan_chunk", "garbage_tokens", "splice_offset", "source_silent_0.1s",
-                 "source_silent_1.5s", "source_silent_3s", "latency_spike_10x")
+                 "source_silent_1.5s", "source_silent_3s", "latency_spike_10x", "wire_error_frame", "wire_slow",
+                 "wire_bad_shape", "wire_nan", "wire_server_dies")
 CASES = [(f, "hybrid") for f in FAULTS] + [(f, "open_loop") for f in SOURCE_FAULTS]
 _RESULTS: dict = {}
 
@@ -69,7 +70,8 @@ def test_registry_names_are_the_public_contract():
         "none", "source_raises", "nan_chunk", "garbage_tokens", "splice_offset", "source_silent_0.1s",
         "source_silent_1.5s", "source_silent_3s", "latency_spike_10x", "perception_dropout_50", "perception_frozen",
         "perception_outlier", "perception_nan", "qp_fail_burst", "mpc_late", "missed_ticks_1", "missed_ticks_5",
-        "missed_ticks_19", "missed_ticks_20", "start_with_velocity", "unreachable_target", "near_singularity"]
+        "missed_ticks_19", "missed_ticks_20", "start_with_velocity", "unreachable_target", "near_singularity",
+        "wire_error_frame", "wire_slow", "wire_bad_shape", "wire_nan", "wire_server_dies"]
     with pytest.raises(ValueError, match="unknown fault"):
         FaultSpec("cosmic_ray")
 
@@ -92,7 +94,10 @@ def test_missed_ticks_abort_only_at_twenty(world, controllers):
 
 @pytest.mark.parametrize("mode", ["hybrid", "open_loop"])
 @pytest.mark.parametrize("fault,reason", [("source_raises", "source_raised"), ("nan_chunk", "source_raised"),
-                                          ("garbage_tokens", "bad_tokens"), ("splice_offset", "splice")])
+                                          ("garbage_tokens", "bad_tokens"), ("splice_offset", "splice"),
+                                          ("wire_error_frame", "source_raised"), ("wire_slow", "source_raised"),
+                                          ("wire_bad_shape", "source_raised"), ("wire_nan", "source_raised"),
+                                          ("wire_server_dies", "source_raised")])
 def test_bad_chunks_are_rejected(world, controllers, fault, reason, mode):
     base, _, _ = episode(world, controllers, "none", mode)
     m, _, _ = episode(world, controllers, fault, mode)
