@@ -67,6 +67,9 @@ class StackConfig:
             last good solve, then the QP tracks the smoothed reference directly until a solve succeeds, s.
         mpc_blend_s: hybrid with MPC: a new plan takes over from the previous one over this long (smoothstep
             blend of the two references; each plan also starts from the state being tracked), s.
+        mpc_phase_s: hybrid with MPC: the MPC ticks are at ``mpc_phase_s + n / mpc.rate_hz``. The real-time mode sets
+            5 ms, half a 100 Hz perception period, so the MPC's 50 Hz work and the filter's 100 Hz fusion fall on
+            different ticks (together they made the slowest ticks); 0 in simulated time keeps the published results.
     """
 
     mode: str = "hybrid"
@@ -91,6 +94,7 @@ class StackConfig:
     abort_after_missed_ticks: int = 20
     mpc_keep_plan_s: float = 0.1
     mpc_blend_s: float = 0.02
+    mpc_phase_s: float = 0.0
     residual_checkpoint: str = ""
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
@@ -132,6 +136,8 @@ class StackConfig:
                              f"got {self.mpc_keep_plan_s}")
         if not 0 <= self.mpc_blend_s <= self.mpc.horizon_steps * self.mpc.dt_s:
             raise ValueError(f"mpc_blend_s must be in [0, the MPC horizon], got {self.mpc_blend_s}")
+        if not 0 <= self.mpc_phase_s < 1.0 / self.mpc.rate_hz:
+            raise ValueError(f"mpc_phase_s must be in [0, the MPC period {1.0 / self.mpc.rate_hz:g} s), got {self.mpc_phase_s}")
         if self.abort_after_missed_ticks < 1:
             raise ValueError(f"abort_after_missed_ticks must be >= 1, got {self.abort_after_missed_ticks}")
         if self.latency_ms / 1000.0 >= self.duration_s:

@@ -77,6 +77,8 @@ class HybridController:
                     if self.use_mpc else None)
         self.mpc_worker = InlineMPC(self.mpc) if self.mpc is not None else None
         self.offpath_us = 0.0  # time this tick spent on work that runs beside the 1 kHz path on a robot (the MPC)
+        self.recorded_plans: list | None = None
+        self._deferred_mpc: tuple | None = None  # a recording's list of (asked s, t0 s, dt s, TCP preview (N, 3))
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
         self._plan: MPCPlan | None = None
@@ -127,7 +129,9 @@ class HybridController:
         self._good_plan_end_s = 0.0
         self._plan = None
         self._prev_plan = None
-        self._next_mpc_s = 0.0
+        self._next_mpc_s = self.config.mpc_phase_s
+        # before the first MPC tick (a phase > 0) the QP holds the start pose, as it does without a plan
+        self._slow_ref = (0.0, pos, np.zeros(3), np.zeros(3), rot, np.zeros(3), np.zeros(3), GRIPPER_OPEN_M)
         if self.mpc_worker is not None:  # keep the built problem (0.3 s to build), forget the episode
             self.mpc_worker.reset()
         self.active = None
@@ -282,7 +286,7 @@ class HybridController:
         return q_rad, dq_rad_s, terms.pos_m, terms.rot, terms.J
 
     def use_mpc_worker(self, worker) -> None:
-        """Solve the MPC with ``worker`` (``mmact_ctrl.mpc_worker``: :class:`ThreadedMPC` in real time) instead of
+        """Solve the MPC with ``worker`` (``mmact_ctrl.mpc_worker``: :class:`ProcessMPC` in real time) instead of
         inline; the previous worker is closed."""
         if self.mpc_worker is not None and self.mpc_worker is not worker:
             self.mpc_worker.close()
@@ -332,7 +336,10 @@ class HybridController:
                 self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
                 problem = self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot)
                 n_solved = len(worker.solve_us)
-                worker.submit(t_s, problem)
+                if getattr(worker, "defer_submit", False):  # sent after the tick (end_tick): it solves while we sleep
+                    self._deferred_mpc = (t_s, problem)
+                else:
+                    worker.submit(t_s, problem)
                 if isinstance(worker, InlineMPC) and len(worker.solve_us) > n_solved:
                     self.offpath_us = worker.solve_us[-1]  # beside the 1 kHz path on a robot: not the tick's time
                 self._next_mpc_s = t_s + self._mpc_period_s
@@ -341,6 +348,8 @@ class HybridController:
                 t_asked, new_plan = done
                 self._prev_plan = self._plan
                 self._plan = new_plan
+                if self.recorded_plans is not None:
+                    self.recorded_plans.append((t_asked, new_plan.t0_s, new_plan.dt_s, np.array(new_plan.ee_pos_m)))
                 if new_plan.ok:
                     self._good_plan_end_s = t_asked + self.config.mpc_keep_plan_s
             t_slow, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._slow_ref
@@ -380,6 +389,32 @@ class HybridController:
         self._gripper_m = gripper
         return TickOutput(tau_nm=tau, gripper_m=gripper, ref_pos_m=ref_pos, ee_pos_m=terms.pos_m,
                           ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])
+
+    def command_state(self) -> tuple[np.ndarray | None, np.ndarray]:
+        """(last torque sent, last commanded acceleration): what a command that comes too late leaves standing."""
+        tau = self.qp.tau_last
+        return (None if tau is None else tau.copy()), self.qp.last_ddq.copy()
+
+    def late_tick(self, before: tuple[np.ndarray | None, np.ndarray], out: TickOutput) -> TickOutput:
+        """The command ``out`` of this tick was ready after its deadline (real time): it never reached the robot,
+        which re-applies the last torque it received (``before``, from :meth:`command_state` at the start of the
+        tick). The QP is put back to that torque and acceleration, so the next command's rate and jerk are measured
+        against what the robot really applied. The planning the tick did (smoother, MPC, filter) stands."""
+        tau, ddq = before
+        if tau is None:  # no command yet: the robot holds its gravity compensation (h)
+            tau = np.array(self.terms.h) if self.terms is not None else out.tau_nm
+        self.qp.tau_last = np.array(tau, dtype=np.float64)
+        self.qp.last_ddq = np.array(ddq, dtype=np.float64)
+        return TickOutput(tau_nm=self.qp.tau_last, gripper_m=out.gripper_m, ref_pos_m=out.ref_pos_m,
+                          ee_pos_m=out.ee_pos_m, ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=out.tcp_vel_m_s)
+
+    def end_tick(self) -> None:
+        """After the tick's command is sent: hand over a deferred MPC problem (a worker that solves beside the loop
+        then solves while the loop waits for its next tick, not while it computes this one's command)."""
+        if self._deferred_mpc is not None:
+            t_s, problem = self._deferred_mpc
+            self._deferred_mpc = None
+            self.mpc_worker.submit(t_s, problem)
 
     def missed_tick(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
         """A control tick whose command never reached the robot: the robot re-applies the last torque it received.

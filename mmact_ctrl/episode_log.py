@@ -21,7 +21,11 @@ class EpisodeLog:
     changed course (``World.target_change_times_s``); ``delay_steps``: per activated chunk, the waypoints of the
     running chunk consumed while it was computed (activation time minus observation time, in chunk steps: the
     inference delay d of RTC, as it actually ran); ``mpc_solve_us``: the wall time of each MPC solve, us (beside the
-    1 kHz path: not in ``tick_us``).
+    1 kHz path: not in ``tick_us``). Real time: ``late_commands`` commands computed after their cycle's deadline (they
+    count in ``missed_ticks`` too: the robot re-applied the last torque), ``deadline`` the pacer's statistics
+    (``mmact_ctrl.realtime.pacer``) with its per-tick ``rt_exec_us`` / ``rt_jitter_us`` / ``rt_late_ticks``,
+    ``recording`` (when the runner records: the target
+    estimate at 100 Hz, the activated chunks, the MPC previews and the frames each query was answered from).
     """
 
     seed: int
@@ -66,6 +70,12 @@ class EpisodeLog:
     floor_clamps: int = 0
     mpc_bypass_ticks: int = 0
     mpc_solve_us: list[float] = field(default_factory=list)
+    late_commands: int = 0
+    recording: dict | None = None
+    deadline: dict | None = None
+    rt_exec_us: np.ndarray | None = None
+    rt_jitter_us: np.ndarray | None = None
+    rt_late_ticks: np.ndarray | None = None
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)
 

@@ -29,10 +29,11 @@ def run_episode(
     link: CommandLink | None = None,
     initial_dq_rad_s: np.ndarray | None = None,
     sensor: TargetSensor | None = None,
+    record: bool = False,
 ) -> EpisodeLog:
     """Run one episode of ``controller.config.duration_s`` and return its log (the arguments are
     :class:`~mmact_ctrl.runner.EpisodeRunner`'s)."""
     runner = EpisodeRunner(world, source, controller, seed, video_fps=video_fps, progress=progress, link=link,
-                           initial_dq_rad_s=initial_dq_rad_s, sensor=sensor)
+                           initial_dq_rad_s=initial_dq_rad_s, sensor=sensor, record=record)
     runner.advance()
     return runner.finish()

@@ -35,6 +35,11 @@
 - reaction (``mmact_ctrl.reaction``): for each change of the target's motion (a jump, flip, swerve, set-off:
   ``EpisodeLog.change_times_s``), ``reaction_s`` the median time until the TCP's velocity turns toward the new
   course, ``reach_after_change_s`` the median time until the TCP is within the success radius again (NaN: none).
+- real time (``--realtime``, ``mmact_ctrl.realtime.pacer``): ``overruns`` (ticks whose command was ready after its
+  cycle: the robot re-applied the last torque), ``overrun_rate``, ``cycles_missed`` (ticks that started a whole period
+  late), ``exec_us`` (a tick's work, median / p99 / max), ``jitter_us`` (its start's lateness), libfranka's
+  ``control_command_success_rate`` (minimum over windows of 100 ticks), ``realtime_rate`` (simulated over wall
+  time); NaN / absent in simulated time.
 - d_measured: the inference delay as it ran, median over chunks of the waypoints of the running chunk consumed
   while the chunk was computed (RTC's d, in chunk steps; ``EpisodeLog.delay_steps``).
 - jump recovery: for each target teleport whose 1 s window ends inside the episode, whether the
@@ -174,6 +179,7 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "tick_us_p99": float(np.percentile(log.tick_us, 99)),
         "mpc_solve_us_median": float(np.median(log.mpc_solve_us)) if log.mpc_solve_us else float("nan"),
         "mpc_solve_us_p99": float(np.percentile(log.mpc_solve_us, 99)) if log.mpc_solve_us else float("nan"),
+        "mpc_solve_us": [float(x) for x in log.mpc_solve_us],
         "plan_ms_median": float(np.median(log.plan_ms)) if log.plan_ms else float("nan"),
         "plan_ms": [float(x) for x in log.plan_ms],
         "source_timing_ms": {k: [float(x) for x in v] for k, v in log.source_timing_ms.items()},
@@ -186,6 +192,50 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "n_changes": int(reaction["n_changes"]),
         "changes_reacted": int(reaction["reacted"]),
         "d_measured": float(np.median(log.delay_steps)) if log.delay_steps else float("nan"),
+        "d_steps": [float(x) for x in log.delay_steps],
+        **_realtime_episode(log),
+    }
+
+
+def _realtime_episode(log: EpisodeLog) -> dict:
+    """The deadline statistics of a real-time episode (empty in simulated time)."""
+    d = log.deadline
+    if not d or not d.get("ticks"):
+        return {}
+    return {
+        "realtime": True,
+        "overruns": int(d["overruns"]),
+        "overrun_rate": float(d["overrun_rate"]),
+        "cycles_missed": int(d["cycles_missed"]),
+        "late_commands": int(log.late_commands),
+        "exec_us_median": float(d["exec_us"]["median"]),
+        "exec_us_p99": float(d["exec_us"]["p99"]),
+        "exec_us_max": float(d["exec_us"]["max"]),
+        "jitter_us_std": float(d["jitter_us"]["std"]),
+        "jitter_us_p99": float(d["jitter_us"]["p99"]),
+        "control_command_success_rate": float(d["control_command_success_rate"]),
+        "realtime_rate": float(d["realtime_rate"]),
+        "exec_us": [float(x) for x in (log.rt_exec_us if log.rt_exec_us is not None else [])],
+    }
+
+
+def _realtime_summary(episodes: list[dict], ticks: int) -> dict:
+    """Deadline statistics over the real-time episodes of a run (pooled ticks), empty in simulated time."""
+    rt = [e for e in episodes if e.get("realtime")]
+    if not rt:
+        return {}
+    exec_us = np.concatenate([np.asarray(e.get("exec_us", []), dtype=float) for e in rt]) if rt else np.zeros(0)
+    overruns = int(sum(e["overruns"] for e in rt))
+    return {
+        "realtime": True,
+        "overruns": overruns,
+        "overrun_rate": float(overruns / max(1, ticks)),
+        "cycles_missed": int(sum(e["cycles_missed"] for e in rt)),
+        "exec_us": ({"median": float(np.median(exec_us)), "p99": float(np.percentile(exec_us, 99)),
+                     "max": float(np.max(exec_us))} if exec_us.size else {}),
+        "jitter_us_p99": float(max(e["jitter_us_p99"] for e in rt)),
+        "control_command_success_rate": float(min(e["control_command_success_rate"] for e in rt)),
+        "realtime_rate": float(np.mean([e["realtime_rate"] for e in rt])),
     }
 
 
@@ -243,6 +293,8 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "mpc_failures": int(sum(e.get("mpc_failures", 0) for e in episodes)),
         "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),
         "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
+        "tick_us_max": float(np.max(tick_us)),
+        "mpc_solve_us": _median_p99([x for e in episodes for x in e.get("mpc_solve_us", [])]),
         "policy_latency_ms": _median_p99([x for e in episodes for x in e.get("plan_ms", [])]),
         "round_trip_ms": _median_p95_max([x for e in episodes for x in e.get("plan_ms", [])]),
         **_source_timing(episodes),
@@ -255,4 +307,6 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "reaction_s": _nanmedian([e.get("reaction_s", float("nan")) for e in episodes]),
         "reach_after_change_s": _nanmedian([e.get("reach_after_change_s", float("nan")) for e in episodes]),
         "d_measured": _nanmedian([e.get("d_measured", float("nan")) for e in episodes]),
+        "d_steps": _median_p95_max([x for e in episodes for x in e.get("d_steps", [])]),
+        **_realtime_summary(episodes, int(len(tick_us))),
     }

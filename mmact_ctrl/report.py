@@ -31,6 +31,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("MPC failures/late", "mpc_failures", "{:d}"),
     ("tick median [us]", "tick_us.median", "{:.0f}"),
     ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
+    ("MPC solve median / p99 [us]", ("mpc_solve_us.median", "mpc_solve_us.p99"), "{:.0f} / {:.0f}"),
     ("real-time factor", "realtime_factor", "{:.1f}x"),
     ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),
     ("  round trip p95 / max [ms]", ("round_trip_ms.p95", "round_trip_ms.max"), "{:.1f} / {:.1f}"),
@@ -39,6 +40,12 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("reaction to a change [s]", "reaction_s", "{:.2f}"),
     ("reach after a change [s]", "reach_after_change_s", "{:.2f}"),
     ("inference delay d [steps]", "d_measured", "{:.1f}"),
+    ("real time: overruns", ("overruns", "overrun_rate"), "{:d} ({:.2%})"),
+    ("  cycles missed", "cycles_missed", "{:d}"),
+    ("  tick work median / p99 [us]", ("exec_us.median", "exec_us.p99"), "{:.0f} / {:.0f}"),
+    ("  start jitter p99 [us]", "jitter_us_p99", "{:.0f}"),
+    ("  command success rate (min)", "control_command_success_rate", "{:.3f}"),
+    ("  real-time rate", "realtime_rate", "{:.3f}"),
     ("measurements lost", "measurements_lost_rate", "{:.0%}"),
     ("sensor [ms per sim s]", "sensor_ms_per_sim_s", "{:.0f}"),
 )
@@ -66,6 +73,13 @@ def _fmt(value, fmt: str) -> str:
     return fmt.format(value)
 
 
+#: rows left out when no run has them (real-time statistics in a simulated-time run, a source that reports no
+#: server timing)
+OPTIONAL_ROWS: frozenset[str] = frozenset({
+    "  server infer [ms]", "real time: overruns", "  cycles missed", "  tick work median / p99 [us]",
+    "  start jitter p99 [us]", "  command success rate (min)", "  real-time rate"})
+
+
 def format_table(summaries: dict[str, dict]) -> str:
     """Side-by-side table: one column per run name."""
     names = list(summaries)
@@ -74,7 +88,10 @@ def format_table(summaries: dict[str, dict]) -> str:
     lines = [" " * width0 + "  " + "  ".join(n.rjust(w) for n, w in zip(names, widths))]
     lines.append("-" * len(lines[0]))
     for label, key, fmt in TABLE_ROWS:
-        cells = [_fmt(_get(summaries[n], key), fmt).rjust(w) for n, w in zip(names, widths)]
+        texts = [_fmt(_get(summaries[n], key), fmt) for n in names]
+        if label in OPTIONAL_ROWS and all(t == "-" for t in texts):
+            continue
+        cells = [t.rjust(w) for t, w in zip(texts, widths)]
         lines.append(label.ljust(width0) + "  " + "  ".join(cells))
     return "\n".join(lines)
 

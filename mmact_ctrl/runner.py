@@ -81,6 +81,15 @@ class EpisodeRunner:
         pause_at_queries: when True, :meth:`advance` stops at each query that falls due, before the source is
             called (:attr:`pending_query` holds its observation); the next :meth:`advance` calls the source and goes
             on. An agent that answers from outside (the Gymnasium environment) sets the answer in between.
+        async_queries: real time: a :class:`~mmact_ctrl.realtime.async_source.AsyncQueries` that asks the source in
+            a worker while the ticks go on (one query in flight; the observation's frames are rendered there from a
+            snapshot of the world, ``world.snapshot()``); each chunk is accepted on the tick it arrives, active at
+            once: its latency is what it took.
+        deadline: real time: an object whose ``missed(k)`` says, once tick ``k``'s command is computed, whether it
+            is ready too late for its cycle; such a command never reaches the robot (it re-applies the last torque:
+            counted in ``missed_ticks`` and ``late_commands``, and 20 in a row abort as on the robot).
+        record: also keep what a recording shows (``EpisodeLog.recording``: the target estimate at 100 Hz, each
+            activated chunk's waypoints, each MPC plan's TCP preview, the frames each query was answered from).
 
     The episode starts at construction (``world.reset(seed)``); a mode that needs what the source cannot do
     (``ChunkExecutor.needs``) is refused here, in one line, before any tick.
@@ -89,7 +98,7 @@ class EpisodeRunner:
     def __init__(self, world: World, source: ChunkSource, controller: HybridController, seed: int,
                  video_fps: float = 0.0, progress=None, link: CommandLink | None = None,
                  initial_dq_rad_s: np.ndarray | None = None, sensor: TargetSensor | None = None,
-                 pause_at_queries: bool = False) -> None:
+                 pause_at_queries: bool = False, async_queries=None, deadline=None, record: bool = False) -> None:
         cfg = controller.config
         self.world, self.source, self.controller, self.config = world, source, controller, cfg
         self.executor = executor = controller.executor
@@ -98,6 +107,10 @@ class EpisodeRunner:
         self.dt_s = dt = cfg.dt_s
         self.n_ticks = n = int(round(cfg.duration_s / dt))
         self.link, self.progress, self.pause_at_queries = link, progress, bool(pause_at_queries)
+        self.async_queries, self.deadline = async_queries, deadline
+        if async_queries is not None and pause_at_queries:
+            raise ValueError("pause_at_queries and async_queries exclude each other")
+        self._inflight: tuple[float, float] | None = None  # async: (query time, next query time it replaced)
         state = world.reset(seed)
         if initial_dq_rad_s is not None:
             state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
@@ -141,8 +154,10 @@ class EpisodeRunner:
             sensor = OracleSensor(world, cfg.perception_hz, 0.0, dt)
         sensor.reset(seed)
         self.sensor = sensor
-        # a source that sees motion (two frames) gets the frame rendered prev_frame_gap_s before each query
-        self.earlier = EarlierFrame(world.render, float(getattr(source, "prev_frame_gap_s", 0.0) or 0.0), dt)
+        # a source that sees motion (two frames) gets the frame rendered prev_frame_gap_s before each query (in real
+        # time a snapshot of the world then, rendered with the query's off the 1 kHz path)
+        grab = world.snapshot if async_queries is not None else world.render
+        self.earlier = EarlierFrame(grab, float(getattr(source, "prev_frame_gap_s", 0.0) or 0.0), dt)
         self.missed_in_row = 0
         self.k = 0  # the next tick
         self.aborted = False
@@ -152,6 +167,11 @@ class EpisodeRunner:
         self._perception_us = 0.0
         self._wall_s = 0.0
         self._finished: EpisodeLog | None = None
+        self.record = bool(record)
+        if self.record:
+            log.recording = {"estimate": [], "chunks": [], "frames": [], "mpc": []}
+        controller.recorded_plans = log.recording["mpc"] if self.record else None
+        self._est_every = max(1, int(round(0.01 / dt)))
 
     # ---- where the episode stands ---------------------------------------------------------------
     @property
@@ -205,8 +225,13 @@ class EpisodeRunner:
             log.measurements += 1
             log.measurements_lost += m.pos_m is None
         self._perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
+        if self.async_queries is not None:
+            self._collect(t)
         self.earlier.tick(t, self.next_plan_s, self.replan_period_s)
         if t >= self.next_plan_s - self._eps:
+            if self.async_queries is not None:
+                self._ask(k, t)
+                return False
             obs = self._observe(k, t)
             if self.pause_at_queries:
                 self.pending_query = obs
@@ -224,6 +249,42 @@ class EpisodeRunner:
         return observe(self.world, self.controller, t, with_image=self.source.needs_image, target_prev_pos_m=prev,
                        frame_gap_s=gap_s, prev_image=self.earlier.take(t) if self.earlier.gap_s > 0 else None)
 
+    def _ask(self, k: int, t: float) -> None:
+        """Real time: hand the query to the worker (its frames rendered there); no other query until it answers."""
+        aq = self.async_queries
+        log, gap = self.log, self._gap_ticks
+        if k >= gap:
+            prev, gap_s = log.target_pos_m[k - gap], gap * self.dt_s
+        else:
+            prev, gap_s = (log.target_pos_m[0], k * self.dt_s) if k > 0 else (None, 0.0)
+        obs = observe(self.world, self.controller, t, with_image=False, target_prev_pos_m=prev, frame_gap_s=gap_s)
+        snaps = None
+        if self.source.needs_image:
+            snaps = (self.world.snapshot(), self.earlier.take(t) if self.earlier.gap_s > 0 else None)
+        intake, controller = self.intake, self.controller
+        scheduled = intake.pending[-1].chunk if intake.pending else (controller.active.chunk if controller.active else None)
+        ctx = QueryContext(t_s=t, latency_s=self.latency_s, scheduled=scheduled)
+        executor, source = self.executor, self.source
+        aq.submit(lambda o: executor.request(source, o, ctx), obs, snaps)
+        self._inflight = (t, self.next_plan_s)
+        self.next_plan_s = math.inf
+
+    def _collect(self, t: float) -> None:
+        """Real time: take the worker's answer if it has come; its chunk is checked and active at once."""
+        answer = self.async_queries.poll()
+        if answer is None:
+            return
+        t_query, next_before = self._inflight
+        self._inflight = None
+        obs = answer.observation
+        chunk = self.intake.request(answer.result, obs)
+        self.log.plan_ms.append(answer.round_trip_s * 1e3)
+        if self.record and obs.image is not None:
+            self.log.recording["frames"].append((obs.t0_s, obs.image))
+        if chunk is not None:
+            self.accept(chunk, obs, t - obs.t0_s)
+        self.next_plan_s = self.executor.after_request(t_query, chunk, next_before, self.replan_period_s)
+
     def _query(self, obs: Observation) -> None:
         """Ask the source (through the executor and the intake) and queue what it answers."""
         t, log, intake, controller = obs.t0_s, self.log, self.intake, self.controller
@@ -232,6 +293,8 @@ class EpisodeRunner:
         p0 = time.perf_counter()
         chunk = intake.request(call, obs)
         log.plan_ms.append((time.perf_counter() - p0) * 1e3)
+        if self.record and obs.image is not None:
+            log.recording["frames"].append((t, obs.image))
         if chunk is not None:
             delay_s = log.plan_ms[-1] / 1e3 if self.config.measured_latency else self.latency_s
             self.accept(chunk, obs, delay_s)
@@ -259,6 +322,8 @@ class EpisodeRunner:
             if self.intake.admit(entry, t, controller.active, gap_m=gap_m):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
                 log.chunk_active_s.append(t)
+                if self.record:
+                    log.recording["chunks"].append((t, entry.chunk.times_s.copy(), entry.chunk.waypoints.copy()))
                 log.delay_steps.append((t - entry.chunk.t0_s) / entry.chunk.dt_s)
                 self.last_arrival_s = t
                 self.next_plan_s = executor.after_activation(t, controller.active, self.next_plan_s)
@@ -268,8 +333,15 @@ class EpisodeRunner:
             controller.watchdog(t)
             log.events.append((t, "watchdog_stop", ""))
         if self.link is None or self.link.delivered(k, t):
-            self.missed_in_row = 0
+            before = controller.command_state() if self.deadline is not None else None
             out = controller.tick(t, state.q_rad, state.dq_rad_s)
+            if before is not None and self.deadline.missed(k):  # ready after its cycle: the robot never got it
+                out = controller.late_tick(before, out)
+                self.missed_in_row += 1
+                log.missed_ticks += 1
+                log.late_commands += 1
+            else:
+                self.missed_in_row = 0
         else:
             self.missed_in_row += 1
             log.missed_ticks += 1
@@ -287,6 +359,10 @@ class EpisodeRunner:
         log.q_rad[k] = state.q_rad
         log.dq_rad_s[k] = state.dq_rad_s
         log.tau_cmd_nm[k] = tau
+        if self.record and k % self._est_every == 0:
+            est = controller.target_estimate(t)
+            if est is not None:
+                log.recording["estimate"].append((t, np.array(est, dtype=float)))
         self.k = k + 1
         if self.missed_in_row >= cfg.abort_after_missed_ticks:
             log.abort = {"t_s": float(t), "reason": "communication_constraints_violation"}
@@ -296,6 +372,7 @@ class EpisodeRunner:
         if self._frame_every and k % self._frame_every == 0:
             log.frames.append(self._render_video() if self._render_video else self.world.render()[0])
         self.world.step(tau, out.gripper_m)
+        controller.end_tick()
         if self.progress is not None and k % 500 == 0:
             self.progress(k / self.n_ticks)
 
@@ -314,7 +391,7 @@ class EpisodeRunner:
         log.smoother_failures = controller.smoother.failures
         if controller.mpc is not None:
             worker = controller.mpc_worker
-            log.mpc_failures = controller.mpc.failures + controller.mpc.late + getattr(worker, "late", 0)
+            log.mpc_failures = int(worker.failures + worker.late)
             log.mpc_solve_us = list(getattr(worker, "solve_us", []))
         log.plan_resyncs = controller.plan_resyncs
         log.floor_clamps = controller.floor_clamps

@@ -236,7 +236,27 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--json", metavar="PATH", help="write {config, summary, episodes, runs} as JSON")
     o.add_argument("--plot", metavar="PATH", help="write a PNG of TCP vs target and the error over time (first episode per mode)")
     o.add_argument("--video", metavar="PATH", help="write an MP4 of the first episode per mode from the camera (MUJOCO_GL=egl)")
+    o.add_argument("--rerun", metavar="PATH.rrd",
+                   help="write a Rerun recording of the first episode per mode (TCP path, target and its estimate, "
+                        "the active chunk, the reference, the MPC preview, per-tick error / torque rate / tick time / "
+                        "overruns, the camera frames of each query); view it later with: rerun PATH.rrd "
+                        "(needs pip install -e '.[viz]')")
+    o.add_argument("--viewer", action="store_true",
+                   help="watch the episodes in MuJoCo's passive viewer (needs a display; without one: one line saying so)")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
+    r = p.add_argument_group("real time")
+    r.add_argument("--realtime", action="store_true",
+                   help="run physics and control paced to the wall clock at 1 kHz, the chunk source computing in its "
+                        "own process meanwhile (a ws:// source as it is; policy, expert or module:factory started by "
+                        "this command through python -m scenarios.serve), the MPC in a process of its own; each chunk "
+                        "becomes active when it actually arrives (--latency-ms does not apply). Reports overruns, "
+                        "cycles missed, tick work and jitter, control_command_success_rate and the real-time rate")
+    r.add_argument("--mpc-phase-ms", type=_number(float, "--mpc-phase-ms", 0, True, 19.999), default=None,
+                   help="hybrid: the MPC ticks are this long after each 20 ms mark (default 5 with --realtime, so the "
+                        "MPC's work and the 100 Hz fusion fall on different ticks; 0 otherwise)")
+    r.add_argument("--rt-priority", type=_number(int, "--rt-priority", 0, True, 99), default=0,
+                   help="real time: run the loop's thread under SCHED_FIFO at this priority (0: normal scheduling; "
+                        "needs the right to, else it runs at normal priority and says so)")
     return p
 
 
@@ -259,7 +279,17 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         perception_hz=perception_hz(args),
         # a noise-free oracle repeats itself legitimately: the frozen gate is for real (noisy) sensors
         filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
+        # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
+        mpc_phase_s=mpc_phase_ms(args) / 1000.0,
     )
+
+
+def mpc_phase_ms(args: argparse.Namespace) -> float:
+    """``--mpc-phase-ms``, else 5 ms in real time (``StackConfig.mpc_phase_s``) and 0 in simulated time."""
+    value = getattr(args, "mpc_phase_ms", None)
+    if value is not None:
+        return float(value)
+    return 5.0 if getattr(args, "realtime", False) else 0.0
 
 
 def perception_hz(args: argparse.Namespace) -> float:
@@ -315,24 +345,70 @@ def make_source_and_world(args: argparse.Namespace):
     return source, world
 
 
+def check_modes_of_running(args: argparse.Namespace) -> None:
+    """One-line errors for switches that cannot go together (before any work)."""
+    if args.realtime:
+        if args.video:
+            raise ValueError("--video renders in the 1 kHz loop: not with --realtime (use --rerun PATH.rrd)")
+        if args.perception == "camera":
+            raise ValueError("--perception camera renders depth images in the 1 kHz loop: not with --realtime yet")
+        if args.viewer:
+            raise ValueError("--viewer syncs the viewer in the 1 kHz loop: not with --realtime (use --rerun PATH.rrd)")
+    if args.viewer:
+        from scenarios.viewer import require_display
+
+        require_display()
+
+
+def realtime_source_args(args: argparse.Namespace):
+    """Real time: (the arguments with the source as a ws:// URL, the ServedSource started for it or None)."""
+    from scenarios.served import ServedSource, serve_argv
+
+    settings = settings_from_args(args)
+    settings.check()
+    if settings.kind == "remote":
+        return args, None
+    from mmact_ctrl.realtime.session import _cpu_split
+
+    _, workers = _cpu_split(0)
+    served = ServedSource(serve_argv(settings), cpus=workers)
+    remote = argparse.Namespace(**{**vars(args), "source": served.url, "checkpoint": None, "source_arg": [],
+                                   "action_steps": 1, "refine_bins": None})
+    return remote, served
+
+
 def run(args: argparse.Namespace) -> dict:
     """Run every requested mode on the same seeds; returns the JSON payload."""
     from tqdm import tqdm
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
-    source, world = make_source_and_world(args)
+    check_modes_of_running(args)
+    served = None
+    source_args = args
+    if args.realtime:
+        source_args, served = realtime_source_args(args)
+    try:
+        source, world = make_source_and_world(source_args)
+    except BaseException:
+        if served is not None:
+            served.close()
+        raise
     try:  # a mode that needs what the source cannot do (inpainting): one line now, not a silent episode later
         for mode in configs:
             require_capabilities(source, make_executor(mode).needs, mode)
     except ValueError:
         close_source(source)
         world.close()
+        if served is not None:
+            served.close()
         raise
     try:
         sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
     except ValueError:
         close_source(source)
         world.close()
+        if served is not None:
+            served.close()
         raise
     runs: dict[str, dict] = {}
     first_logs = {}
@@ -342,10 +418,25 @@ def run(args: argparse.Namespace) -> dict:
         for mode, cfg in configs.items():
             controller = HybridController(cfg)
             episodes, ticks = [], []
+            session = None
+            if args.realtime:
+                from mmact_ctrl.realtime.session import RealtimeConfig, RealtimeSession
+
+                session = RealtimeSession(world, source, controller, RealtimeConfig(fifo_priority=args.rt_priority))
             for i in range(args.episodes):
                 seed = args.seed + i
                 fps = 30.0 if (args.video and i == 0) else 0.0
-                log = run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor)
+                record = bool(args.rerun) and i == 0
+                if session is not None:
+                    log = session.episode(seed, sensor=sensor, record=record)
+                    if i == 0 and session.priority_refused:
+                        print(f"note: {session.priority_refused}; the loop runs at normal priority", file=sys.stderr)
+                elif args.viewer:
+                    from scenarios.viewer import run_with_viewer
+
+                    log = run_with_viewer(world, source, controller, seed, sensor=sensor, record=record)
+                else:
+                    log = run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor, record=record)
                 m = episode_metrics(log)
                 m["mode"] = mode
                 episodes.append(m)
@@ -354,6 +445,8 @@ def run(args: argparse.Namespace) -> dict:
                     first_logs[mode] = log
                 bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
                 bar.update(1)
+            if session is not None:
+                session.close()
             runs[mode] = {
                 "config": dataclasses.asdict(cfg),
                 "summary": summarize(episodes, np.concatenate(ticks)),
@@ -364,6 +457,8 @@ def run(args: argparse.Namespace) -> dict:
         getattr(sensor, "close", lambda: None)()
         close_source(source)
         world.close()
+        if served is not None:
+            served.close()
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
@@ -385,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         t0 = time.perf_counter()
         payload = run(args)
-    except (ValueError, FileNotFoundError, CheckpointError, ConnectionError, TimeoutError) as exc:
+    except (ValueError, FileNotFoundError, CheckpointError, ConnectionError, TimeoutError, RuntimeError) as exc:
         # bad configuration, a missing or unreadable checkpoint, a server that is down: one clear line
         parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     logs = payload.pop("_logs")
@@ -396,6 +491,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"latency {latency} ms")  # one description: table header and plot title
     if args.source == "expert":  # the expert's chunks go through the action tokenizer; other sources have their own
         run_desc += f", {args.bins or 'no'} bins"
+    if args.realtime:
+        run_desc = run_desc.replace(f"latency {latency} ms", "real time (latency as it ran)")
     if args.source == "policy":  # our policy in this process
         w = payload["config"]["refine_bins_used"]
         passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"
@@ -411,6 +508,11 @@ def main(argv: list[str] | None = None) -> int:
 
         plot_runs(logs, args.plot, title=run_desc)
         print(f"wrote {args.plot}")
+    if args.rerun:
+        from mmact_ctrl.recording import write_recording
+
+        write_recording(logs, args.rerun, camera_names=tuple(payload["config"]["cameras"]))
+        print(f"wrote {args.rerun}  (view it: rerun {args.rerun})")
     if args.video:
         from scenarios.video import write_mp4
 

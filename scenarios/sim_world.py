@@ -108,6 +108,7 @@ class SimWorld:
         self._meas_rng: np.random.Generator | None = None
         self._renderer: mujoco.Renderer | None = None
         self._video_renderer: mujoco.Renderer | None = None
+        self._render_process = None  # scenarios.render_worker.RenderProcess, started by render_snapshot
         self._kinematics_stale = True
 
     # ---------------------------------------------------------------- episode
@@ -275,9 +276,25 @@ class SimWorld:
         """TCP position (3,) at ``HOME_Q_RAD`` with the gripper open, m."""
         return home_tcp_pos_m(self.model)
 
+    def snapshot(self) -> dict:
+        """What the cameras would see now, as copies (positions and mocap poses, ~10 us): for
+        :meth:`render_snapshot`, off the 1 kHz path."""
+        d = self.data
+        return {"time": float(d.time), "qpos": d.qpos.copy(), "mocap_pos": d.mocap_pos.copy(),
+                "mocap_quat": d.mocap_quat.copy()}
+
+    def render_snapshot(self, snapshot: dict) -> np.ndarray:
+        """The frames ``(V, H, W, 3)`` of :meth:`render` for a :meth:`snapshot`, rendered in a process of its own
+        (``scenarios.render_worker``; MuJoCo's renderer holds the GIL); safe to call from another thread."""
+        if self._render_process is None:
+            from scenarios.render_worker import RenderProcess
+
+            self._render_process = RenderProcess(self.scene)
+        return self._render_process.render(snapshot)
+
     def close(self) -> None:
-        """Free the renderer (the world stays usable; a later ``render`` makes a new one)."""
-        for name in ("_renderer", "_video_renderer"):
+        """Free the renderers (the world stays usable; a later ``render`` makes a new one)."""
+        for name in ("_renderer", "_video_renderer", "_render_process"):
             renderer = getattr(self, name)
             if renderer is not None:
                 renderer.close()

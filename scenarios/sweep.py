@@ -212,7 +212,8 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     m = episode_metrics(log)
     m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
     m.pop("instruction", None)
-    m.pop("plan_ms", None)  # per-chunk list; the row keeps plan_ms_median
+    for key in ("plan_ms", "d_steps", "mpc_solve_us", "exec_us", "source_timing_ms"):  # per-chunk/tick lists:
+        m.pop(key, None)  # the row keeps their medians
     m.pop("target_start_pos_m", None)  # a vector; the cell's seed fixes it
     return {**cell, "duration_s": duration_s, **{k: v for k, v in m.items() if k != "seed"}}
 
