@@ -263,7 +263,8 @@ class EpisodeRunner:
             snaps = (self.world.snapshot(), self.earlier.take(t) if self.earlier.gap_s > 0 else None)
         intake, controller = self.intake, self.controller
         scheduled = intake.pending[-1].chunk if intake.pending else (controller.active.chunk if controller.active else None)
-        ctx = QueryContext(t_s=t, latency_s=self.latency_s, scheduled=scheduled)
+        # the latency is what answers have taken, not the configured one (which does not apply in real time)
+        ctx = QueryContext(t_s=t, latency_s=aq.latency_estimate_s(self.latency_s), scheduled=scheduled)
         executor, source = self.executor, self.source
         aq.submit(lambda o: executor.request(source, o, ctx), obs, snaps)
         self._inflight = (t, self.next_plan_s)

@@ -51,7 +51,8 @@ class QueryContext:
 
     Attributes:
         t_s: the observation time, s.
-        latency_s: the configured inference latency, s.
+        latency_s: the inference latency the query is expected to take, s (the configured one; in real time the
+            longest of the recent measured round trips).
         scheduled: the chunk that will be executing while the new one is computed (the last one accepted, pending
             or active), or None.
     """

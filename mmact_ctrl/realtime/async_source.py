@@ -17,6 +17,10 @@ from typing import Any, Callable
 from mmact_ctrl.chunk import Observation
 
 
+#: how many recent round trips the latency estimate looks at
+RECENT = 10
+
+
 @dataclass
 class Answer:
     """A finished query: the observation it answered (frames included), the outcome, and how long it took.
@@ -53,6 +57,7 @@ class AsyncQueries:
         self._done: Answer | None = None
         self.in_flight = False
         self._stop = False
+        self._recent_s: list[float] = []  # the last round trips, s (the latency estimate)
         self._thread = threading.Thread(target=self._run, name="chunk-source", daemon=True)
         self._thread.start()
 
@@ -73,7 +78,14 @@ class AsyncQueries:
         with self._cv:
             done, self._done = self._done, None
             self.in_flight = False
+        self._recent_s = (self._recent_s + [done.round_trip_s])[-RECENT:]
         return done
+
+    def latency_estimate_s(self, default_s: float) -> float:
+        """What the next answer will probably take: the longest of the last :data:`RECENT` round trips (as LeRobot's
+        ``LatencyTracker`` does; a mode that commits waypoints during inference, such as inpainting, uses it), or
+        ``default_s`` before the first answer."""
+        return max(self._recent_s) if self._recent_s else float(default_s)
 
     def _run(self) -> None:
         if self._cpus:
