@@ -11,8 +11,8 @@ import argparse
 import gymnasium
 
 import mmact_ctrl  # noqa: F401  (importing it registers the environment)
-from scenarios.factory import make_expert
-from scenarios.gym_env import as_observation
+from scenarios.world.factory import make_expert
+from scenarios.world.gym_env import as_observation
 
 
 def run(episodes: int = 20, mode: str = "hybrid", target: str = "linear") -> list[dict]:

@@ -180,9 +180,9 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--calls", type=int, default=2000, help="calls per component")
     p.add_argument("--duration-s", type=float, default=6.0, help="length of the timed hybrid episode, s")
-    p.add_argument("--world", default="scenarios.factory:make_world", help="module:function that builds the world")
-    p.add_argument("--source", default="scenarios.factory:make_expert", help="module:function that builds the chunk source")
-    p.add_argument("--sensor", default="scenarios.camera_sensor:make_camera_sensor",
+    p.add_argument("--world", default="scenarios.world.factory:make_world", help="module:function that builds the world")
+    p.add_argument("--source", default="scenarios.world.factory:make_expert", help="module:function that builds the chunk source")
+    p.add_argument("--sensor", default="scenarios.world.camera_sensor:make_camera_sensor",
                    help="module:function(world) that builds the camera sensor timed as the perception step ('' to skip)")
     p.add_argument("--json", metavar="PATH", help="write {component: {median_us, p99_us}, realtime_factor: x}")
     args = p.parse_args(argv)
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(r, dict):
             print(f"{name:<12}{r['median_us']:>14.1f}{r['p99_us']:>12.1f}")
     print("tick: the 1 kHz path of the hybrid episode (the MPC solves beside it: mpc_solve)")
-    source_name = "scripted source" if args.source == "scenarios.factory:make_expert" else f"source {args.source}"
+    source_name = "scripted source" if args.source == "scenarios.world.factory:make_expert" else f"source {args.source}"
     print(f"{f'real-time factor (hybrid episode, {source_name})':<12}: {results['realtime_factor']:.1f}x")
     if "realtime_factor_camera" in results:
         print(f"camera perception: {results['perception_ms_per_sim_s']:.0f} ms per simulated second at the sensor rate; "

@@ -7,7 +7,7 @@ each stamped with the time its scene was captured, and the filter fuses each at 
 - :class:`OracleSensor` (here): the world's ``measure_target()`` (truth + Gaussian noise, random dropout) at
   ``rate_hz``, delivered ``latency_ms`` after capture. With zero latency it is exactly the channel the stack
   always had.
-- ``scenarios.camera_sensor.CameraSensor``: the instructed ball measured from rendered depth and segmentation
+- ``scenarios.world.camera_sensor.CameraSensor``: the instructed ball measured from rendered depth and segmentation
   images of a scene camera (pixel-quantized, depth noise growing with distance, real occlusion by the arm).
 """
 

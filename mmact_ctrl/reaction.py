@@ -2,7 +2,7 @@
 
 ``reaction_metrics(t_s, ee_pos_m, target_pos_m, change_times_s)`` works on a logged episode (TCP and
 target positions at the log times, world frame) and the change times of the target's motion
-(``scenarios.targets``: ``motion.change_times_s``). Definitions, for each change at ``t_c``:
+(``scenarios.world.targets``: ``motion.change_times_s``). Definitions, for each change at ``t_c``:
 
 - evaluated: the change lies in the episode and its window ``[t_c, t_c + window_s]`` ends inside it
   (``window_s`` >= the 0.2 s course window below); otherwise both its times are NaN. Changes after

@@ -65,5 +65,5 @@ class World(Protocol):
 
     def target_change_times_s(self) -> tuple[float, ...]:
         """Times (s) at which the target's course changes abruptly this episode: teleports, velocity
-        flips, turns, set-offs from rest (``scenarios.targets``); wall bounces do not count."""
+        flips, turns, set-offs from rest (``scenarios.world.targets``); wall bounces do not count."""
         ...

@@ -19,7 +19,7 @@ adds each camera's frame 0.1 s before the sample (``images`` then holds ``[cam0@
 ``meta.json`` says ``frame_offsets_s: [0, -0.1]``; the first sample of an episode, which has no earlier frame, repeats
 the current one), ``--motion all`` mixes static and moving balls (linear, reversal, swerve, random_walk, jump), and
 ``--expert-lead velocity`` labels each chunk with the leading expert (where the two frames say the ball will be at
-each waypoint's time, reflected at the workspace walls; ``scenarios.expert``). ``--holdout-box-m X0 X1 Y0 Y1``
+each waypoint's time, reflected at the workspace walls; ``scenarios.world.expert``). ``--holdout-box-m X0 X1 Y0 Y1``
 leaves out every scene whose instructed ball starts in that region of the table (for measuring generalization).
 
 DAgger-style relabelling (``--driver-checkpoint PATH --driver-prob P``): each chunk that *drives* the arm comes
@@ -45,9 +45,9 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import observe
 from policy.action_tokenizer import ActionBounds
-from scenarios.expert import LEADS, ExpertConfig, ScriptedExpert, expert_actions, lead_velocity_m_s
-from scenarios.panda_scene import TARGET_COLORS
-from scenarios.factory import make_world
+from scenarios.world.expert import LEADS, ExpertConfig, ScriptedExpert, expert_actions, lead_velocity_m_s
+from scenarios.world.panda_scene import TARGET_COLORS
+from scenarios.world.factory import make_world
 
 #: single motions a collection may use, and the mixes.
 MOTIONS: tuple[str, ...] = ("static", "linear", "reversal", "swerve", "random_walk", "jump")
@@ -73,7 +73,7 @@ class CollectConfig:
     """Attributes:
     episodes: number of episodes.
     objects: 1, 2, or 0 for a random mix (one third single-object).
-    motion: target motion: one of ``MOTIONS`` (a ``scenarios.targets`` kind), "mixed" (two thirds static, one third
+    motion: target motion: one of ``MOTIONS`` (a ``scenarios.world.targets`` kind), "mixed" (two thirds static, one third
         linear) or "all" (one third static, the rest evenly linear, reversal, swerve, random_walk, jump).
     speed_m_s: speed of moving targets.
     duration_s: episode length.

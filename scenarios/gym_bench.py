@@ -36,8 +36,8 @@ def bench(episodes: int = 5, duration_s: float = 6.0, mode: str = "hybrid") -> d
     import mmact_ctrl  # noqa: F401  (registers the environment)
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
-    from scenarios.factory import make_expert
-    from scenarios.gym_env import ENV_ID, as_observation
+    from scenarios.world.factory import make_expert
+    from scenarios.world.gym_env import ENV_ID, as_observation
     from scenarios.moving_target import build_parser, make_sensor, stack_config
 
     env = gymnasium.make(ENV_ID, mode=mode, cameras=("front",), duration_s=duration_s, terminate_on_success=False)

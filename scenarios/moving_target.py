@@ -27,12 +27,12 @@ from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, summarize
 from mmact_ctrl.report import format_table, write_json
 from policy.checkpoint import CheckpointError
-from scenarios.targets import KINDS as TARGET_KINDS
-from scenarios.expert import LEADS
+from scenarios.world.targets import KINDS as TARGET_KINDS
+from scenarios.world.expert import LEADS
 from mmact_ctrl.executors import make_executor
 from mmact_ctrl.sources.action_space import GRIPPERS, KINDS as ACTION_KINDS
 from mmact_ctrl.sources.contract import require_capabilities
-from scenarios.factory import POLICY_PLANE_Z_M, make_world
+from scenarios.world.factory import POLICY_PLANE_Z_M, make_world
 from scenarios.sources import build_source, close_source, scene_settings, settings_from_args, source_spec_arg
 
 PROG = "python -m scenarios.moving_target"
@@ -307,7 +307,7 @@ def perception_latency_ms(args: argparse.Namespace) -> float:
 def make_sensor(args: argparse.Namespace, world, dt_s: float):
     """The target sensor of ``--perception`` on ``world``."""
     if args.perception == "camera":
-        from scenarios.camera_sensor import CameraSensor, CameraSensorConfig
+        from scenarios.world.camera_sensor import CameraSensor, CameraSensorConfig
 
         return CameraSensor(world, CameraSensorConfig(rate_hz=perception_hz(args), latency_ms=perception_latency_ms(args),
                                                       cameras=tuple(args.cameras)))
@@ -355,7 +355,7 @@ def check_modes_of_running(args: argparse.Namespace) -> None:
         if args.viewer:
             raise ValueError("--viewer syncs the viewer in the 1 kHz loop: not with --realtime (use --rerun PATH.rrd)")
     if args.viewer:
-        from scenarios.viewer import require_display
+        from scenarios.world.viewer import require_display
 
         require_display()
 
@@ -432,7 +432,7 @@ def run(args: argparse.Namespace) -> dict:
                     if i == 0 and session.priority_refused:
                         print(f"note: {session.priority_refused}; the loop runs at normal priority", file=sys.stderr)
                 elif args.viewer:
-                    from scenarios.viewer import run_with_viewer
+                    from scenarios.world.viewer import run_with_viewer
 
                     log = run_with_viewer(world, source, controller, seed, sensor=sensor, record=record)
                 else:
@@ -514,7 +514,7 @@ def main(argv: list[str] | None = None) -> int:
         write_recording(logs, args.rerun, camera_names=tuple(payload["config"]["cameras"]))
         print(f"wrote {args.rerun}  (view it: rerun {args.rerun})")
     if args.video:
-        from scenarios.video import write_mp4
+        from scenarios.world.video import write_mp4
 
         for mode, log in logs.items():
             path = Path(args.video)

@@ -31,7 +31,7 @@ PROG = "python -m scenarios.realtime_check"
 def build_parser() -> argparse.ArgumentParser:
     from scenarios.moving_target import _number, _OneLineErrorParser
     from scenarios.sources import source_spec_arg
-    from scenarios.targets import KINDS
+    from scenarios.world.targets import KINDS
 
     p = _OneLineErrorParser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--source", type=source_spec_arg, default="expert",

@@ -21,7 +21,7 @@ import sys
 from mmact_ctrl.sources.contract import check_source
 from mmact_ctrl.sources.openpi.server import DEFAULT_PORT, ListenError, PolicyServer
 from mmact_ctrl.sources.openpi.serving import SourcePolicy
-from scenarios.expert import LEADS
+from scenarios.world.expert import LEADS
 
 PROG = "python -m scenarios.serve"
 EPILOG = f"""examples:
@@ -145,7 +145,7 @@ def make_served_source(args: argparse.Namespace):
     """(the chunk source, its scene dict, a one-line description) of the arguments."""
     if args.source == "policy":
         from mmact_ctrl.policy_source import PolicyChunkSource
-        from scenarios.factory import policy_scene
+        from scenarios.world.factory import policy_scene
 
         source = PolicyChunkSource(args.checkpoint, action_steps=args.action_steps or 1,
                                    refine_bins=_refine_bins(args.refine_bins))
@@ -153,7 +153,7 @@ def make_served_source(args: argparse.Namespace):
         return source, scene, f"policy {source.checkpoint.name} (refine +-{source.refine_bins} bins)"
     scene = {"plane_z_m": float(args.plane_z_m), "n_objects": int(args.objects)}
     if args.source == "expert":
-        from scenarios.factory import make_expert, make_world
+        from scenarios.world.factory import make_expert, make_world
 
         world = make_world("linear", plane_z_m=args.plane_z_m, n_objects=args.objects)  # for its workspace box
         try:

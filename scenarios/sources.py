@@ -124,7 +124,7 @@ def build_source(settings: SourceSettings, world=None):
         return PolicyChunkSource(settings.checkpoint, action_steps=settings.action_steps,
                                  refine_bins=settings.refine_bins)
     if kind == "expert":
-        from scenarios.factory import make_expert
+        from scenarios.world.factory import make_expert
 
         return make_expert(bins=settings.bins, horizon=settings.horizon, dt_s=settings.chunk_dt_s or 0.1,
                            lead=settings.expert_lead, world=world)
@@ -139,7 +139,7 @@ def scene_settings(source) -> dict:
     """``make_world`` settings of the scenes ``source`` wants: our policy's (its cameras, training plane, two balls),
     or what a foreign source declares (``camera_names``, ``image_size_px``, ``scene``); empty for the expert."""
     if hasattr(source, "policy") and hasattr(getattr(source, "policy"), "bundle"):
-        from scenarios.factory import policy_scene
+        from scenarios.world.factory import policy_scene
 
         return policy_scene(source)
     out: dict = {}

@@ -37,7 +37,7 @@ PROG = "python -m scenarios.train_residual"
 TRAIN_SEED0 = 10_000
 SPEEDS_M_S = (0.1, 0.2, 0.3, 0.4)
 REPLAN_HZ = (1.0, 2.0, 5.0)
-#: the new families, used when ``scenarios.targets.KINDS`` has them.
+#: the new families, used when ``scenarios.world.targets.KINDS`` has them.
 MOVING_KINDS = ("linear", "circle", "random_walk", "jump", "reversal", "accelerating", "swerve")
 #: the rate samples are taken at (the perception rate the executor runs at), Hz.
 SAMPLE_HZ = 100.0
@@ -45,15 +45,15 @@ DEFAULT_CARD = DEFAULT_RESIDUAL_CHECKPOINT.parent / "RESIDUAL_CARD.md"
 
 
 def available_kinds() -> tuple[str, ...]:
-    """The moving target families of ``scenarios.targets.KINDS`` at run time (``static`` excluded)."""
-    from scenarios.targets import KINDS
+    """The moving target families of ``scenarios.world.targets.KINDS`` at run time (``static`` excluded)."""
+    from scenarios.world.targets import KINDS
 
     return tuple(k for k in KINDS if k != "static")
 
 
 def expert_leads() -> tuple[str, ...]:
     """The expert's ``lead`` settings if ``make_expert`` takes one, else ``("",)`` (no keyword)."""
-    from scenarios.factory import make_expert
+    from scenarios.world.factory import make_expert
 
     return ("velocity", "none") if "lead" in inspect.signature(make_expert).parameters else ("",)
 
@@ -154,7 +154,7 @@ def _recording_sensor(world, rate_hz: float, dt_s: float):
 
 def _parts(spec: EpisodeSpec):
     from controllers.robot_model import PandaModel
-    from scenarios.factory import make_expert, make_world, policy_scene
+    from scenarios.world.factory import make_expert, make_world, policy_scene
 
     skey = ("source", spec.source, spec.lead)
     if skey not in _CACHE:
@@ -543,7 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--policy-episodes", type=int, default=30, help="episodes of the policy source when --sources "
                    "includes policy (default 30)")
     d.add_argument("--kinds", nargs="+", default=None, metavar="KIND",
-                   help="moving target families (default: every non-static kind of scenarios.targets.KINDS at run "
+                   help="moving target families (default: every non-static kind of scenarios.world.targets.KINDS at run "
                         "time: linear, circle, random_walk, jump, and reversal, accelerating, swerve where present)")
     d.add_argument("--static-fraction", type=float, default=0.08, help="share of static-target episodes (default 0.08)")
     d.add_argument("--none-lead-fraction", type=float, default=0.25,

@@ -11,14 +11,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenarios.sim_world import SimWorld  # first: sets MUJOCO_GL before mujoco is imported
+from scenarios.world.sim_world import SimWorld  # first: sets MUJOCO_GL before mujoco is imported
 
 import mujoco  # noqa: E402
 
 from controllers.robot_description import HOME_Q_RAD  # noqa: E402
-from scenarios.camera_sensor import CameraSensor, CameraSensorConfig  # noqa: E402
-from scenarios.panda_scene import HAND_BODY, SceneConfig  # noqa: E402
-from scenarios.targets import TargetSpec  # noqa: E402
+from scenarios.world.camera_sensor import CameraSensor, CameraSensorConfig  # noqa: E402
+from scenarios.world.panda_scene import HAND_BODY, SceneConfig  # noqa: E402
+from scenarios.world.targets import TargetSpec  # noqa: E402
 
 #: workspace points at increasing distance from the ``front`` camera (0.97, 1.25, 1.56 m)
 NEAR, MID, FAR = (0.65, -0.3, 0.45), (0.5, 0.0, 0.3), (0.35, 0.3, 0.15)

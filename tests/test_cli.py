@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from scenarios.moving_target import main
-from scenarios.targets import KINDS
+from scenarios.world.targets import KINDS
 
 BAD = [
     (["--replan-hz", "-1"], "--replan-hz"),

@@ -10,10 +10,10 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics, limit_violation_mask
 from policy.action_tokenizer import ActionTokenizer
-from scenarios.expert import ScriptedExpert
-from scenarios.panda_scene import SceneConfig
-from scenarios.sim_world import SimWorld
-from scenarios.targets import TargetSpec
+from scenarios.world.expert import ScriptedExpert
+from scenarios.world.panda_scene import SceneConfig
+from scenarios.world.sim_world import SimWorld
+from scenarios.world.targets import TargetSpec
 
 
 def _circle(t, centre, radius_m, omega):

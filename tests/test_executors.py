@@ -13,7 +13,7 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.executors import EXECUTORS, ChunkExecutor, ClockedExecutor, Layers, make_executor
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.factory import make_expert, make_world
+from scenarios.world.factory import make_expert, make_world
 
 ROOT = Path(__file__).resolve().parents[1]
 

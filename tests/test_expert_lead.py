@@ -11,8 +11,8 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
 from mmact_ctrl.reference import ChunkReference
-from scenarios.expert import ExpertConfig, ScriptedExpert
-from scenarios.factory import make_expert, make_world
+from scenarios.world.expert import ExpertConfig, ScriptedExpert
+from scenarios.world.factory import make_expert, make_world
 
 
 def _obs(target, prev, gap=0.1, ee=(0.3, 0.0, 0.5)):

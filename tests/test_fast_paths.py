@@ -135,7 +135,7 @@ def test_vectorized_preview_equals_pointwise_reference(rule, tail):
 
 
 def test_linear_motion_fast_path_equals_numpy_fold():
-    from scenarios.targets import LinearMotion, _fold
+    from scenarios.world.targets import LinearMotion, _fold
 
     rng = np.random.default_rng(5)
     for _ in range(100):

@@ -13,8 +13,8 @@ from controllers.robot_model import PandaModel
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.factory import make_expert, make_world
-from scenarios.fault_injectors import (
+from scenarios.world.factory import make_expert, make_world
+from scenarios.faults.injectors import (
     FAULTS,
     UNREACHABLE_POS_M,
     FaultSpec,

@@ -13,8 +13,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import mmact_ctrl  # noqa: F401  (registers the environment)
-from scenarios.factory import make_expert
-from scenarios.gym_env import ENV_ID, as_observation
+from scenarios.world.factory import make_expert
+from scenarios.world.gym_env import ENV_ID, as_observation
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""MuJoCo (scenarios.panda_scene) and Pinocchio load the same URDF: their dynamics must agree.
+"""MuJoCo (scenarios.world.panda_scene) and Pinocchio load the same URDF: their dynamics must agree.
 
 At 20 random arm configurations within the joint limits (fingers locked at the open gripper,
 0.04 m each, in both models) we compare the 7x7 arm block of the joint-space mass matrix (with the
@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 
 from controllers.robot_description import ARM_JOINTS, FINGER_JOINTS, TCP_FRAME, JointLimits, panda_urdf_path
-from scenarios.panda_scene import (
+from scenarios.world.panda_scene import (
     GRIPPER_MAX_M,
     SceneConfig,
     arm_dof_adr,

@@ -13,7 +13,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.factory import make_expert, make_world
+from scenarios.world.factory import make_expert, make_world
 from scenarios.sweep import Study, main as sweep_main
 
 

@@ -1,5 +1,5 @@
 """The target motion families with abrupt course changes (``reversal``, ``swerve``, ``accelerating``) and
-``change_times_s`` on every family (``scenarios.targets``)."""
+``change_times_s`` on every family (``scenarios.world.targets``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from scenarios.targets import KINDS, TargetSpec, make_motion, target_spec
+from scenarios.world.targets import KINDS, TargetSpec, make_motion, target_spec
 
 NEW_KINDS = ("reversal", "swerve", "accelerating")
 SEEDS = (0, 1, 2, 7)
@@ -159,8 +159,8 @@ def test_new_fields_are_validated(kwargs, message):
 
 
 def test_sim_world_reports_change_times():
-    from scenarios.panda_scene import SceneConfig
-    from scenarios.sim_world import SimWorld
+    from scenarios.world.panda_scene import SceneConfig
+    from scenarios.world.sim_world import SimWorld
 
     world = SimWorld(SceneConfig(), TargetSpec(kind="swerve"))
     world.reset(seed=4)

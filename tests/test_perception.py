@@ -47,7 +47,7 @@ def test_latency_compensation_in_the_loop_beats_treating_late_measurements_as_cu
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
     from mmact_ctrl.metrics import episode_metrics
-    from scenarios.factory import make_expert, make_world
+    from scenarios.world.factory import make_expert, make_world
 
     world = make_world("linear", 0.2, n_objects=1)
     errors = {}

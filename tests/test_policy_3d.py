@@ -19,8 +19,8 @@ from policy.config import ModelConfig
 from policy.dataset import DatasetError, PolicyDataset, read_meta
 from policy.train import known_prefix_mask, load_tokenized
 from scenarios.collect import CollectConfig, collect, in_box
-from scenarios.factory import make_expert, make_world
-from scenarios.panda_scene import TARGET_RGBA
+from scenarios.world.factory import make_expert, make_world
+from scenarios.world.panda_scene import TARGET_RGBA
 
 HOLDOUT = (0.5, 0.65, 0.0, 0.3)
 
@@ -266,7 +266,7 @@ def test_the_shipped_3d_checkpoint_aims_from_two_views_and_two_frames_at_the_ins
     anywhere in the box; from the first query of real rendered scenes its chunk is valid and ends nearer the
     instructed ball than the arm starts, and nearer it than the other ball."""
     from mmact_ctrl.policy_source import PolicyChunkSource
-    from scenarios.factory import policy_scene
+    from scenarios.world.factory import policy_scene
 
     assert SHIPPED_3D.is_file() and SHIPPED_3D.stat().st_size <= 20e6
     source = PolicyChunkSource(SHIPPED_3D)

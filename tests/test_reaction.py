@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mmact_ctrl.reaction import reaction_metrics
-from scenarios.targets import make_motion, target_spec
+from scenarios.world.targets import make_motion, target_spec
 
 DT_S = 1e-3
 T_S = np.arange(0.0, 4.0, DT_S)

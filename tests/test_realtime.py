@@ -16,7 +16,7 @@ from mmact_ctrl.metrics import episode_metrics
 from mmact_ctrl.mpc_worker import ProcessMPC
 from mmact_ctrl.realtime.pacer import WallClockPacer, deadline_stats
 from mmact_ctrl.realtime.session import RealtimeConfig, RealtimeSession
-from scenarios.factory import make_expert, make_world
+from scenarios.world.factory import make_expert, make_world
 
 REPO = Path(__file__).resolve().parents[1]
 #: an idle 2-core machine holds its deadlines on all but a few ticks of a short open_loop episode: the tolerance

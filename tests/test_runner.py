@@ -9,7 +9,7 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
 from mmact_ctrl.runner import EpisodeRunner
-from scenarios.factory import make_expert, make_world
+from scenarios.world.factory import make_expert, make_world
 
 
 @pytest.fixture(scope="module")

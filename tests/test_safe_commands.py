@@ -14,9 +14,9 @@ from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.reference import ChunkReference
-from scenarios.panda_scene import SceneConfig
-from scenarios.sim_world import SimWorld
-from scenarios.targets import TargetSpec
+from scenarios.world.panda_scene import SceneConfig
+from scenarios.world.sim_world import SimWorld
+from scenarios.world.targets import TargetSpec
 
 
 def test_rate_limited_qp_tracks_a_10cm_step_without_any_violation():

@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from scenarios.sim_world import SimWorld  # first: sets MUJOCO_GL before mujoco is imported
+from scenarios.world.sim_world import SimWorld  # first: sets MUJOCO_GL before mujoco is imported
 
 import mujoco  # noqa: E402
 
 from controllers.robot_description import HOME_Q_RAD, JointLimits  # noqa: E402
-from scenarios.panda_scene import (  # noqa: E402
+from scenarios.world.panda_scene import (  # noqa: E402
     GRIPPER_MAX_M,
     SceneConfig,
     arm_dof_adr,
@@ -20,8 +20,8 @@ from scenarios.panda_scene import (  # noqa: E402
     home_tcp_pos_m,
     tcp_site_id,
 )
-from scenarios.targets import HOME_TCP_POS_M, KINDS, TargetSpec, make_motion  # noqa: E402
-from scenarios.video import write_mp4  # noqa: E402
+from scenarios.world.targets import HOME_TCP_POS_M, KINDS, TargetSpec, make_motion  # noqa: E402
+from scenarios.world.video import write_mp4  # noqa: E402
 
 SEEDS = range(6)
 

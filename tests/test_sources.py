@@ -20,7 +20,7 @@ from mmact_ctrl.sources import ActionAdapter, ActionSpace, SourceError, capabili
 from mmact_ctrl.sources.action_space import GRIPPERS, gripper_values, gripper_width_m
 from mmact_ctrl.sources.lerobot import LeRobotSource
 from mmact_ctrl.sources.loader import load_source, parse_source_args
-from scenarios.factory import make_expert, make_world
+from scenarios.world.factory import make_expert, make_world
 from scenarios.moving_target import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -161,7 +161,7 @@ def _one_line(proc, *needles):
 
 def test_inpaint_with_a_source_that_cannot_is_one_line_naming_source_and_mode(tmp_path):
     plugin = tmp_path / "plan_only.py"
-    plugin.write_text("from scenarios.factory import make_expert\n"
+    plugin.write_text("from scenarios.world.factory import make_expert\n"
                       "class PlanOnly:\n    needs_image = False\n    def __init__(self):\n        self.e = make_expert()\n"
                       "    def plan(self, obs):\n        return self.e.plan(obs)\n"
                       "def make():\n    return PlanOnly()\n")

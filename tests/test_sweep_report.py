@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from mmact_ctrl.stats import wilson_interval
-from scenarios.sweep_report import write_report
+from scenarios.sweep.report import write_report
 
 MODES = ("open_loop", "receding", "temporal_ensemble", "inpaint", "residual", "hybrid")
 N = 10

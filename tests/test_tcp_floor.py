@@ -9,7 +9,7 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
-from scenarios.factory import make_world
+from scenarios.world.factory import make_world
 
 
 class _IntoTheTable:

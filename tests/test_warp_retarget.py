@@ -11,7 +11,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.factory import make_world
+from scenarios.world.factory import make_world
 
 AIM_ERROR_M = np.array([0.0, 0.06, 0.0])
 APPROACH_S = 0.8

@@ -24,7 +24,7 @@ from mmact_ctrl.sources.openpi import (ClientConfig, ConnectionLost, FrameError,
                                        PolicyClient, PolicyServer, RemoteSource, RequestTimeout, ServerError,
                                        ServerUnreachable, SourcePolicy, StateKey, codec, load_mapping)
 from mmact_ctrl.sources.openpi.mapping import SCENE_CAMERAS, resize_bilinear
-from scenarios.factory import make_expert
+from scenarios.world.factory import make_expert
 
 FAST = ClientConfig(connect_timeout_s=1.0, connect_tries=2, retry_wait_s=0.1, request_timeout_s=2.0,
                     reconnect_timeout_s=0.5, close_timeout_s=0.2)
@@ -206,7 +206,7 @@ def test_remote_source_refuses_what_contradicts_the_server(expert_server):
 
 # ---- mappings ----------------------------------------------------------------------------------------------------
 def test_scene_cameras_are_the_scenes():
-    from scenarios.panda_scene import AVAILABLE_CAMERAS
+    from scenarios.world.panda_scene import AVAILABLE_CAMERAS
 
     assert SCENE_CAMERAS == AVAILABLE_CAMERAS
 
@@ -505,7 +505,7 @@ def test_episodes_through_a_server_run_as_in_process():
     from mmact_ctrl.config import StackConfig
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.loop import run_episode
-    from scenarios.factory import make_world
+    from scenarios.world.factory import make_world
 
     world = make_world("linear", 0.2, n_objects=1)
     model = PandaModel()

@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # this checkout's 
 import numpy as np  # noqa: E402
 
 from controllers.target_estimator import FILTER_MODELS, EstimatorConfig, TargetEstimator  # noqa: E402
-from scenarios.targets import make_motion, target_spec  # noqa: E402
+from scenarios.world.targets import make_motion, target_spec  # noqa: E402
 
 KINDS = [("circle", 0.4), ("linear", 0.2), ("accelerating", 0.3), ("jump", 0.2), ("static", 0.0), ("swerve", 0.3)]
 TAUS_S = np.array([0.1, 0.2, 0.4])

@@ -61,7 +61,7 @@ import numpy as np
 from controllers.rotations import rot_from_rotvec, rotvec_from_rot
 from mmact_ctrl.chunk import Observation
 
-#: the cameras of the simulated scene (``scenarios.panda_scene.AVAILABLE_CAMERAS``; a test holds them equal)
+#: the cameras of the simulated scene (``scenarios.world.panda_scene.AVAILABLE_CAMERAS``; a test holds them equal)
 SCENE_CAMERAS: tuple[str, ...] = ("front", "top", "side")
 #: the gripper's full opening, m
 GRIPPER_MAX_M = 0.08

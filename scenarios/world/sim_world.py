@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 
 from controllers.robot_description import ARM_JOINTS, HOME_Q_RAD  # noqa: E402
 from mmact_ctrl.world import RobotState  # noqa: E402
-from scenarios.panda_scene import (  # noqa: E402
+from scenarios.world.panda_scene import (  # noqa: E402
     GRIPPER_MAX_M,
     TARGET_COLORS,
     SceneConfig,
@@ -32,7 +32,7 @@ from scenarios.panda_scene import (  # noqa: E402
     target_mocap_ids,
     tcp_site_id,
 )
-from scenarios.targets import StaticMotion, TargetMotion, TargetSpec, make_motion  # noqa: E402
+from scenarios.world.targets import StaticMotion, TargetMotion, TargetSpec, make_motion  # noqa: E402
 
 #: instruction templates; ``{color}`` is the colour of the instructed object.
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -108,7 +108,7 @@ class SimWorld:
         self._meas_rng: np.random.Generator | None = None
         self._renderer: mujoco.Renderer | None = None
         self._video_renderer: mujoco.Renderer | None = None
-        self._render_process = None  # scenarios.render_worker.RenderProcess, started by render_snapshot
+        self._render_process = None  # scenarios.world.render_worker.RenderProcess, started by render_snapshot
         self._kinematics_stale = True
 
     # ---------------------------------------------------------------- episode
@@ -238,7 +238,7 @@ class SimWorld:
             except Exception as exc:  # noqa: BLE001 - GL backends raise assorted errors
                 raise RuntimeError(f"cannot create a MuJoCo renderer with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}: "
                                    f"{exc}. MUJOCO_GL is read when mujoco is first imported: set it (egl for headless) or import "
-                                   f"scenarios.sim_world before anything imports mujoco") from exc
+                                   f"scenarios.world.sim_world before anything imports mujoco") from exc
         self._refresh_kinematics()
         mujoco.mj_camlight(self.model, self.data)
         frames = []
@@ -285,9 +285,9 @@ class SimWorld:
 
     def render_snapshot(self, snapshot: dict) -> np.ndarray:
         """The frames ``(V, H, W, 3)`` of :meth:`render` for a :meth:`snapshot`, rendered in a process of its own
-        (``scenarios.render_worker``; MuJoCo's renderer holds the GIL); safe to call from another thread."""
+        (``scenarios.world.render_worker``; MuJoCo's renderer holds the GIL); safe to call from another thread."""
         if self._render_process is None:
-            from scenarios.render_worker import RenderProcess
+            from scenarios.world.render_worker import RenderProcess
 
             self._render_process = RenderProcess(self.scene)
         return self._render_process.render(snapshot)

@@ -116,7 +116,7 @@ class MovingTargetEnv(gymnasium.Env):
                  image_size_px: int = 96, action_space_kind: str = "tcp_pose", gripper: str = "width_m",
                  horizon: int = 16, chunk_dt_s: float = 0.1, prev_frame_gap_s: float = 0.0, success_bonus: float = 1.0,
                  terminate_on_success: bool = True, wall_clock_info: bool = False, **settings: Any) -> None:
-        from scenarios.factory import make_world
+        from scenarios.world.factory import make_world
         from scenarios.moving_target import make_sensor, stack_config
 
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -334,4 +334,4 @@ def as_observation(info: dict) -> Observation:
 def register() -> None:
     """Register :data:`ENV_ID` with Gymnasium (``mmact_ctrl`` does it on import when Gymnasium is installed)."""
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="scenarios.gym_env:MovingTargetEnv")
+        gymnasium.register(id=ENV_ID, entry_point="scenarios.world.gym_env:MovingTargetEnv")

@@ -1,17 +1,17 @@
 """The one place that builds the MuJoCo world and the scripted expert from plain settings.
 
 The CLI, the sweep, the data collector and tools that must not import ``scenarios`` directly
-(``mmact_ctrl.bench`` loads them by the name ``scenarios.factory:make_world``) all use these.
+(``mmact_ctrl.bench`` loads them by the name ``scenarios.world.factory:make_world``) all use these.
 """
 
 from __future__ import annotations
 
 from policy.action_tokenizer import ActionTokenizer
 from policy.vocab import VocabLayout
-from scenarios.expert import ExpertConfig, ScriptedExpert
-from scenarios.panda_scene import SceneConfig
-from scenarios.sim_world import SimWorld
-from scenarios.targets import target_spec
+from scenarios.world.expert import ExpertConfig, ScriptedExpert
+from scenarios.world.panda_scene import SceneConfig
+from scenarios.world.sim_world import SimWorld
+from scenarios.world.targets import target_spec
 
 #: height (m) of the balls in the learned policy's scenes (``scenarios.collect --plane-z-m``): from its one
 #: camera a ball's depth is only determined when all balls lie at one height.

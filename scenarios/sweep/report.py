@@ -2,8 +2,8 @@
 
 Per study a success table (95 % Wilson intervals), then paired same-seed comparisons of hybrid
 against the best other mode of each condition (McNemar / Wilcoxon), and the conditions where the
-control layer adds nothing. Tables: :mod:`scenarios.sweep_tables`; figures:
-:mod:`scenarios.sweep_figures`; statistics: :mod:`scenarios.stats`.
+control layer adds nothing. Tables: :mod:`scenarios.sweep.tables`; figures:
+:mod:`scenarios.sweep.figures`; statistics: :mod:`scenarios.stats`.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from scenarios import sweep_figures as figs
+from scenarios.sweep import figures as figs
 from mmact_ctrl.stats import wilson_interval
-from scenarios.sweep_tables import (STUDIES, compare, comparison_table, cond_label, group_label, group_of, modes_of,
+from scenarios.sweep.tables import (STUDIES, compare, comparison_table, cond_label, group_label, group_of, modes_of,
                                     normalize, num, ordered, row_axes, sort_key, study_names,
                                     study_tables)
 

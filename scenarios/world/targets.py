@@ -50,7 +50,7 @@ import numpy as np
 KINDS: tuple[str, ...] = ("static", "linear", "circle", "random_walk", "jump", "reversal", "accelerating", "swerve")
 
 #: world position (m) of the Panda's ``tcp`` site at ``HOME_Q_RAD`` with the gripper open, as
-#: computed by ``scenarios.panda_scene.home_tcp_pos_m()`` (a test holds the two equal to 1 mm).
+#: computed by ``scenarios.world.panda_scene.home_tcp_pos_m()`` (a test holds the two equal to 1 mm).
 HOME_TCP_POS_M: tuple[float, float, float] = (0.30689, 0.0, 0.48688)
 
 _GRID_DT_S = 0.01  # random-walk (and reversal, swerve, accelerating) precomputation grid, s

@@ -79,7 +79,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede th
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from scenarios.sim_world import SimWorld  # noqa: E402
+from scenarios.world.sim_world import SimWorld  # noqa: E402
 
 #: time tolerance for "due" and "arrived" comparisons, s (poll times are sums of float ticks).
 _TIME_EPS_S = 1e-9

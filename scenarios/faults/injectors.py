@@ -9,7 +9,7 @@ Each fault wraps one part of the stack and leaves everything else untouched:
   the measurements and the log all see it) out of reach, or to the edge of the workspace;
 - the controller's solvers (:func:`_qp_fail_burst`, :func:`_mpc_late`): the real, counted fallback paths are
   forced for a while;
-- the wire (``wire_*``, ``scenarios.wire_faults``): the source served over openpi's protocol on 127.0.0.1, the
+- the wire (``wire_*``, ``scenarios.faults.wire``): the source served over openpi's protocol on 127.0.0.1, the
   server raising (an error frame), slow past the client's timeout, answering wrong shapes or NaN, or dying and
   coming back;
 - the command link (:class:`DroppedTicks`): a :class:`~mmact_ctrl.loop.CommandLink` that drops ticks;
@@ -421,10 +421,10 @@ def _source_fault(behaviour: str):
 
 def _wire_fault(behaviour: str):
     """The source served over openpi's protocol on 127.0.0.1 with the wire failing in the window
-    (``scenarios.wire_faults``); the server stops when the injection is closed."""
+    (``scenarios.faults.wire``); the server stops when the injection is closed."""
 
     def build(spec, world, source, controller, inj: Injection) -> None:
-        from scenarios.wire_faults import WireServed
+        from scenarios.faults.wire import WireServed
 
         served = WireServed(source, behaviour, inj.window_s, scene={"n_objects": int(getattr(world, "n_objects", 2))})
         inj.source = served

@@ -1,4 +1,4 @@
-"""The fault-injection suite: every fault of ``scenarios.fault_injectors.FAULTS`` x execution modes x seeds, with
+"""The fault-injection suite: every fault of ``scenarios.faults.injectors.FAULTS`` x execution modes x seeds, with
 the scripted expert and with the learned policy, checking that nothing escapes the loop and nothing unsafe is sent.
 
     python -m scenarios.faults --quick --out /tmp/faults_quick     # every fault x every mode, 1 seed, 3 s, ~1-2 min
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from mmact_ctrl.config import MODES
-from scenarios.fault_injectors import FAULTS, FaultSpec
+from scenarios.faults.injectors import FAULTS, FaultSpec
 from scenarios.sources import source_spec_arg
 
 PROG = "python -m scenarios.faults"
@@ -84,7 +84,7 @@ class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 def build_parser() -> argparse.ArgumentParser:
     from scenarios.moving_target import _number, _OneLineErrorParser
-    from scenarios.targets import KINDS as TARGET_KINDS
+    from scenarios.world.targets import KINDS as TARGET_KINDS
 
     p = _OneLineErrorParser(
         prog=PROG,
@@ -143,7 +143,7 @@ def _source_key(spec: str, args: dict | None) -> tuple:
 
 
 def _world(source: str, target: str, speed: float, source_args: dict | None = None):
-    from scenarios.factory import make_world
+    from scenarios.world.factory import make_world
     from scenarios.sources import scene_settings
 
     key = ("world", _source_key(source, source_args), target, speed)
@@ -158,7 +158,7 @@ def _source(source: str, source_args: dict | None = None):
     from scenarios.sources import SourceSettings, build_source
 
     if source == "expert":
-        from scenarios.factory import make_expert
+        from scenarios.world.factory import make_expert
 
         return make_expert()
     key = _source_key(source, source_args)
@@ -209,7 +209,7 @@ def run_cell(cell: dict, keep_log: bool = False):
     from mmact_ctrl.config import StackConfig
     from mmact_ctrl.controller import HybridController
     from mmact_ctrl.metrics import episode_metrics
-    from scenarios.fault_injectors import run_fault_episode
+    from scenarios.faults.injectors import run_fault_episode
 
     spec = FaultSpec(cell["fault"], t_fault_s=cell["onset_s"])
     row = {k: cell[k] for k in ("fault", "mode", "source", "seed")}

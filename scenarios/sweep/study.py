@@ -162,7 +162,7 @@ def _source_and_world(cell: dict):
     """The cell's chunk source and world, built once per process (``scenarios.sources``): the expert with the cell's
     bins and lead in a world of the cell's motion; any other source (our policy, ``module:factory``, ``ws://``) in
     the scenes it asks for."""
-    from scenarios.factory import make_expert, make_world
+    from scenarios.world.factory import make_expert, make_world
     from scenarios.sources import SourceSettings, build_source, scene_settings
 
     spec = cell.get("source", "expert")
@@ -200,7 +200,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
     if cell.get("perception", "oracle") == "camera":  # the ball measured in rendered frames (30 Hz, 50 ms)
         skey = ("camera", id(world))
         if skey not in _CACHE:
-            from scenarios.camera_sensor import CameraSensor, CameraSensorConfig
+            from scenarios.world.camera_sensor import CameraSensor, CameraSensorConfig
 
             _CACHE[skey] = CameraSensor(world, CameraSensorConfig())
         sensor = _CACHE[skey]
@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
             studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
         else:
             studies = default_grid(args.quick, args.seeds)
-        from scenarios.targets import KINDS
+        from scenarios.world.targets import KINDS
 
         for s in studies:
             bad = [t for t in s.target if t not in KINDS]
@@ -382,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
         row = json.loads((out / "cells" / f"{cell_key(c, duration_s)}.json").read_text())
         rows.append({**row, "study": c["study"]})
     write_csv(rows, out / "results.csv")
-    from scenarios.sweep_report import write_report
+    from scenarios.sweep.report import write_report
 
     write_report(rows, out, wall_s=time.perf_counter() - t0, resumed=len(cells) - len(todo), notes=notes)
     for n in notes:

@@ -1,5 +1,5 @@
 """The sweep report's PNG figures (matplotlib, Agg). Each function takes normalized rows
-(:func:`scenarios.sweep_tables.normalize`), writes one PNG and returns whether it wrote one."""
+(:func:`scenarios.sweep.tables.normalize`), writes one PNG and returns whether it wrote one."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mmact_ctrl.stats import t_interval  # noqa: E402
-from scenarios.sweep_tables import (group_label, group_of, mean_metric, modes_of, num, ordered,  # noqa: E402
+from scenarios.sweep.tables import (group_label, group_of, mean_metric, modes_of, num, ordered,  # noqa: E402
                                     success_stats)
 
 CHUNK_HORIZON = 16  # waypoints per chunk (0.1 s each): d >= H means the next chunk is never on time

@@ -26,7 +26,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
-from scenarios.targets import reflect_into_box
+from scenarios.world.targets import reflect_into_box
 
 GRIPPER_OPEN_M = 0.08
 #: what the expert aims at (``ExpertConfig.lead``)

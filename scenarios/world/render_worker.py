@@ -12,13 +12,13 @@ import multiprocessing as mp
 
 import numpy as np
 
-from scenarios.panda_scene import SceneConfig
+from scenarios.world.panda_scene import SceneConfig
 
 
 def _serve(conn, scene: SceneConfig) -> None:
     import mujoco
 
-    from scenarios.panda_scene import build_panda_model
+    from scenarios.world.panda_scene import build_panda_model
 
     model = build_panda_model(scene)
     data = mujoco.MjData(model)

@@ -1,6 +1,6 @@
 """Wire faults: the episode's source served over openpi's protocol on 127.0.0.1, with the wire failing in the window.
 
-Each ``wire_*`` fault of ``scenarios.fault_injectors`` puts the cell's source (the expert, our policy, a plugin)
+Each ``wire_*`` fault of ``scenarios.faults.injectors`` puts the cell's source (the expert, our policy, a plugin)
 behind a real websocket server in a thread of this process (``mmact_ctrl.sources.openpi``) and drives the episode
 through a real :class:`~mmact_ctrl.sources.openpi.RemoteSource`. In the fault window the server
 
