@@ -11,6 +11,7 @@ draws TCP vs target over time and the error curve; ``--video PATH`` writes an MP
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
 import textwrap
@@ -377,88 +378,69 @@ def realtime_source_args(args: argparse.Namespace):
     return remote, served
 
 
+def _episode_runner(args: argparse.Namespace, world, source, controller, sensor, stack: contextlib.ExitStack):
+    """``run(seed, record) -> EpisodeLog`` for one mode: on the wall clock (``--realtime``), in the viewer
+    (``--viewer``) or plain; what it opens is closed by ``stack``."""
+    if args.realtime:
+        from mmact_ctrl.realtime.session import RealtimeConfig, RealtimeSession
+
+        session = stack.enter_context(RealtimeSession(world, source, controller,
+                                                      RealtimeConfig(fifo_priority=args.rt_priority)))
+        if session.priority_refused:
+            print(f"note: {session.priority_refused}; the loop runs at normal priority", file=sys.stderr)
+        return lambda seed, record, fps: session.episode(seed, sensor=sensor, record=record)
+    if args.viewer:
+        from scenarios.world.viewer import run_with_viewer
+
+        return lambda seed, record, fps: run_with_viewer(world, source, controller, seed, sensor=sensor, record=record)
+    return lambda seed, record, fps: run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor,
+                                                 record=record)
+
+
 def run(args: argparse.Namespace) -> dict:
     """Run every requested mode on the same seeds; returns the JSON payload."""
     from tqdm import tqdm
 
     configs = {mode: stack_config(args, mode) for mode in args.mode}  # validates before any work
     check_modes_of_running(args)
-    served = None
-    source_args = args
-    if args.realtime:
-        source_args, served = realtime_source_args(args)
-    try:
-        source, world = make_source_and_world(source_args)
-    except BaseException:
-        if served is not None:
-            served.close()
-        raise
-    try:  # a mode that needs what the source cannot do (inpainting): one line now, not a silent episode later
-        for mode in configs:
-            require_capabilities(source, make_executor(mode).needs, mode)
-    except ValueError:
-        close_source(source)
-        world.close()
-        if served is not None:
-            served.close()
-        raise
-    try:
-        sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
-    except ValueError:
-        close_source(source)
-        world.close()
-        if served is not None:
-            served.close()
-        raise
     runs: dict[str, dict] = {}
     first_logs = {}
-    total = len(configs) * args.episodes
-    bar = tqdm(total=total, desc="episodes", unit="ep", disable=args.quiet, file=sys.stderr)
-    try:
+    with contextlib.ExitStack() as stack:  # everything opened below is closed, whatever happens
+        source_args = args
+        if args.realtime:
+            source_args, served = realtime_source_args(args)
+            if served is not None:
+                stack.callback(served.close)
+        source, world = make_source_and_world(source_args)
+        stack.callback(world.close)
+        stack.callback(close_source, source)
+        # a mode that needs what the source cannot do (inpainting): one line now, not a silent episode later
+        for mode in configs:
+            require_capabilities(source, make_executor(mode).needs, mode)
+        sensor = make_sensor(args, world, next(iter(configs.values())).dt_s)
+        stack.callback(getattr(sensor, "close", lambda: None))
+        bar = tqdm(total=len(configs) * args.episodes, desc="episodes", unit="ep", disable=args.quiet, file=sys.stderr)
+        stack.callback(bar.close)
         for mode, cfg in configs.items():
             controller = HybridController(cfg)
             episodes, ticks = [], []
-            session = None
-            if args.realtime:
-                from mmact_ctrl.realtime.session import RealtimeConfig, RealtimeSession
-
-                session = RealtimeSession(world, source, controller, RealtimeConfig(fifo_priority=args.rt_priority))
-            for i in range(args.episodes):
-                seed = args.seed + i
-                fps = 30.0 if (args.video and i == 0) else 0.0
-                record = bool(args.rerun) and i == 0
-                if session is not None:
-                    log = session.episode(seed, sensor=sensor, record=record)
-                    if i == 0 and session.priority_refused:
-                        print(f"note: {session.priority_refused}; the loop runs at normal priority", file=sys.stderr)
-                elif args.viewer:
-                    from scenarios.world.viewer import run_with_viewer
-
-                    log = run_with_viewer(world, source, controller, seed, sensor=sensor, record=record)
-                else:
-                    log = run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor, record=record)
-                m = episode_metrics(log)
-                m["mode"] = mode
-                episodes.append(m)
-                ticks.append(log.tick_us)
-                if i == 0:
-                    first_logs[mode] = log
-                bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
-                bar.update(1)
-            if session is not None:
-                session.close()
+            with contextlib.ExitStack() as mode_stack:
+                episode = _episode_runner(args, world, source, controller, sensor, mode_stack)
+                for i in range(args.episodes):
+                    log = episode(args.seed + i, bool(args.rerun) and i == 0, 30.0 if (args.video and i == 0) else 0.0)
+                    m = episode_metrics(log)
+                    m["mode"] = mode
+                    episodes.append(m)
+                    ticks.append(log.tick_us)
+                    if i == 0:
+                        first_logs[mode] = log
+                    bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
+                    bar.update(1)
             runs[mode] = {
                 "config": dataclasses.asdict(cfg),
                 "summary": summarize(episodes, np.concatenate(ticks)),
                 "episodes": episodes,
             }
-    finally:
-        bar.close()
-        getattr(sensor, "close", lambda: None)()
-        close_source(source)
-        world.close()
-        if served is not None:
-            served.close()
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
