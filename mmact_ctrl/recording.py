@@ -104,7 +104,7 @@ def _log_episode(rr, rec, name: str, log: EpisodeLog, camera_names: tuple[str, .
 
 def entity_paths(path: str | Path) -> set[str]:
     """The entity paths a Rerun file holds (read back with rerun-sdk)."""
-    rr = _rerun()
+    _rerun()  # the one-line error when rerun-sdk is missing
     from rerun.chunk import RrdReader
 
     paths = set()

@@ -34,6 +34,8 @@ from mmact_ctrl.executors import make_executor
 from mmact_ctrl.sources.action_space import GRIPPERS, KINDS as ACTION_KINDS
 from mmact_ctrl.sources.contract import require_capabilities
 from scenarios.world.factory import POLICY_PLANE_Z_M, make_world
+from scenarios.cli import HelpFormatter, OneLineErrorParser
+from scenarios.cli import number as _number
 from scenarios.sources import build_source, close_source, scene_settings, settings_from_args, source_spec_arg
 
 PROG = "python -m scenarios.moving_target"
@@ -44,35 +46,9 @@ MAX_SPEED_M_S = 1.7
 MAX_REPLAN_HZ = 100.0
 
 
-class _OneLineErrorParser(argparse.ArgumentParser):
-    """argparse that reports a bad value in one line (no usage dump) and exits with status 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
 def _refine_bins(text: str) -> int | None:
     """``auto`` -> None (the checkpoint's matched window), else an integer >= 0."""
     return None if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
-
-
-def _number(kind, name: str, low: float | None = None, low_inclusive: bool = True, high: float | None = None):
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a{'n integer' if kind is int else ' number'}, got {text!r}")
-        if not np.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name} must be finite, got {text!r}")
-        if low is not None and (value < low or (value == low and not low_inclusive)):
-            rel = ">=" if low_inclusive else ">"
-            raise argparse.ArgumentTypeError(f"{name} must be {rel} {low:g}, got {text}")
-        if high is not None and value > high:
-            raise argparse.ArgumentTypeError(f"{name} must be <= {high:g}, got {text}")
-        return value
-
-    return parse
 
 
 def _plane(text: str):
@@ -98,18 +74,8 @@ EPILOG = """examples:
 """
 
 
-class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
-    """Examples kept as written; a default printed once (not where the help already says it, nor None/False)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
-        if "default" in text.lower() or action.default in (None, False, [], argparse.SUPPRESS):
-            return text
-        return super()._get_help_string(action)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _OneLineErrorParser(
+    p = OneLineErrorParser(
         prog=PROG,
         description=textwrap.fill(
             "Drive the MuJoCo Panda toward a moving target with an action-chunk source (by default the shipped "
@@ -118,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
             "Ruckig + MPC + task-space QP) buys back over executing each chunk open-loop and over the field's fixes.",
             width=100),
         epilog=EPILOG,
-        formatter_class=_HelpFormatter,
+        formatter_class=HelpFormatter,
     )
     src = p.add_argument_group("chunk source")
     src.add_argument("--source", type=source_spec_arg, default=DEFAULT_SOURCE, metavar="SOURCE",

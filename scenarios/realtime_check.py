@@ -14,7 +14,6 @@ simulated-latency figures are optimistic. ``OUT/results.json`` holds both runs.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,8 @@ PROG = "python -m scenarios.realtime_check"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from scenarios.moving_target import _number, _OneLineErrorParser
+    from scenarios.cli import OneLineErrorParser as _OneLineErrorParser
+    from scenarios.cli import number as _number
     from scenarios.sources import source_spec_arg
     from scenarios.world.targets import KINDS
 

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import math
 import signal
 import sys
 
 from mmact_ctrl.sources.contract import check_source
 from mmact_ctrl.sources.openpi.server import DEFAULT_PORT, ListenError, PolicyServer
 from mmact_ctrl.sources.openpi.serving import SourcePolicy
+from scenarios.cli import OneLineErrorParser as _OneLineErrorParser
+from scenarios.cli import number as _number
 from scenarios.world.expert import LEADS
 
 PROG = "python -m scenarios.serve"
@@ -38,28 +39,6 @@ check it:  curl http://127.0.0.1:8000/healthz   (answers OK)
 _ONLY_FOR = {"--checkpoint": ("policy", "checkpoint"), "--action-steps": ("policy", "action_steps"),
              "--refine-bins": ("policy", "refine_bins"), "--expert-lead": ("expert", "expert_lead"),
              "--bins": ("expert", "bins"), "--horizon": ("expert", "horizon"), "--chunk-dt-s": ("expert", "chunk_dt_s")}
-
-
-class _OneLineErrorParser(argparse.ArgumentParser):
-    """argparse that reports a bad value in one line (no usage dump) and exits with status 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _number(kind, name: str, low: float, low_inclusive: bool = True, high: float | None = None):
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a{'n integer' if kind is int else ' number'}, got {text!r}")
-        if not math.isfinite(value) or value < low or (value == low and not low_inclusive) or (high is not None and value > high):
-            bound = f"{'>=' if low_inclusive else '>'} {low:g}" + (f" and <= {high:g}" if high is not None else "")
-            raise argparse.ArgumentTypeError(f"{name} must be {bound}, got {text}")
-        return value
-
-    return parse
 
 
 def _source_arg(text: str) -> tuple[str, str]:

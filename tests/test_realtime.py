@@ -52,7 +52,7 @@ def test_a_short_real_time_episode_holds_its_deadlines(world):
 def _stalled_episode(world, stall_s: float, at_tick: int = 300):
     expert = make_expert(lead="velocity", world=world)
     controller = HybridController(StackConfig(mode="open_loop", duration_s=0.8))
-    session = RealtimeSession(world, expert, controller)
+    session = RealtimeSession(world, expert, controller, PACED)
     try:
         from mmact_ctrl.runner import EpisodeRunner
 
@@ -86,7 +86,7 @@ def test_twenty_late_commands_in_a_row_abort_as_on_the_robot(world):
 def test_the_mpc_process_handing_late_plans_is_survived(world):
     expert = make_expert(lead="velocity", world=world)
     controller = HybridController(StackConfig(mode="hybrid", duration_s=1.0))
-    with RealtimeSession(world, expert, controller) as session:
+    with RealtimeSession(world, expert, controller, PACED) as session:
         worker = controller.mpc_worker
         assert isinstance(worker, ProcessMPC)
         worker.max_solve_s = 1e-6  # every plan comes back too late
@@ -107,7 +107,7 @@ def test_a_real_time_episode_with_a_served_source_runs_end_to_end():
         source = RemoteSource(served.url)
         controller = HybridController(StackConfig(mode="hybrid", duration_s=2.0, mpc_phase_s=0.005))
         try:
-            with RealtimeSession(w, source, controller) as session:
+            with RealtimeSession(w, source, controller, PACED) as session:
                 log = session.episode(2, record=True)
         finally:
             source.close()

@@ -83,7 +83,8 @@ class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from scenarios.moving_target import _number, _OneLineErrorParser
+    from scenarios.cli import OneLineErrorParser as _OneLineErrorParser
+    from scenarios.cli import number as _number
     from scenarios.world.targets import KINDS as TARGET_KINDS
 
     p = _OneLineErrorParser(
