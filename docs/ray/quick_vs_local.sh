@@ -2,6 +2,7 @@
 # The sweep's quick grid on a local Ray head (2 workers, in a loopback-only network namespace) vs the local backend:
 # every result column of the 75 cells and the report tables must be identical. Needs root (ip netns) and the cluster extra.
 set -e
+cd "$(dirname "$0")/../.."
 . .venv/bin/activate; export MUJOCO_GL=egl
 rm -rf ${OUT:-/tmp}/q_local ${OUT:-/tmp}/q_ray
 python -m scenarios.sweep --quick --out ${OUT:-/tmp}/q_local --quiet --workers 2
