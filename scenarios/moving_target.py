@@ -40,6 +40,8 @@ from scenarios.sources import build_source, close_source, scene_settings, settin
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
+#: per-tick lists of the episode metrics that the summary pools and the JSON leaves out
+PER_TICK_KEYS: tuple[str, ...] = ("exec_us", "mpc_solve_us")
 #: the fastest target any arm here can follow: the Panda's TCP speed limit, m/s
 MAX_SPEED_M_S = 1.7
 #: the fastest replanning that means anything: the slow loop at the target channel's rate, Hz
@@ -402,11 +404,11 @@ def run(args: argparse.Namespace) -> dict:
                         first_logs[mode] = log
                     bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
                     bar.update(1)
-            runs[mode] = {
-                "config": dataclasses.asdict(cfg),
-                "summary": summarize(episodes, np.concatenate(ticks)),
-                "episodes": episodes,
-            }
+            summary = summarize(episodes, np.concatenate(ticks))
+            for e in episodes:  # per-tick lists: pooled into the summary, too long for the JSON (medians stay)
+                for key in PER_TICK_KEYS:
+                    e.pop(key, None)
+            runs[mode] = {"config": dataclasses.asdict(cfg), "summary": summary, "episodes": episodes}
     last = args.mode[-1]
     payload = {
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],

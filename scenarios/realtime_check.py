@@ -165,7 +165,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc).splitlines()[0])
     text = report(results, args)
     (out / "report.md").write_text(text)
-    write_json(out / "results.json", {t: {k: v for k, v in r.items()} for t, r in results.items()})
+    # the rows and each run's summaries (the episodes are in the main job's JSON when it is asked for)
+    write_json(out / "results.json", {t: {"latency_ms": r["latency_ms"], "rows": r["rows"],
+                                          "real": {m: run["summary"] for m, run in r["real"]["runs"].items()},
+                                          "sim": {m: run["summary"] for m, run in r["sim"]["runs"].items()}}
+                                      for t, r in results.items()})
     print(text)
     print(f"wrote {out / 'report.md'}, {out / 'results.json'} ({time.perf_counter() - t0:.0f} s)")
     return 0
