@@ -414,7 +414,8 @@ def run(args: argparse.Namespace) -> dict:
         "config": {**vars(args), "modes": list(args.mode), "mode": last, "stack": runs[last]["config"],
                    "target_spec": dataclasses.asdict(world.target), "objects": int(world.n_objects),
                    "cameras": list(world.scene.camera_names),
-                   "refine_bins_used": getattr(source, "refine_bins", None)},
+                   "refine_bins_used": getattr(source, "refine_bins", None),
+                   "source_url": getattr(source, "name", args.source) if args.realtime else args.source},
         "summary": runs[last]["summary"],
         "episodes": runs[last]["episodes"],
         "runs": runs,
@@ -443,7 +444,9 @@ def main(argv: list[str] | None = None) -> int:
         run_desc += f", {args.bins or 'no'} bins"
     if args.realtime:
         run_desc = run_desc.replace(f"latency {latency} ms", "real time (latency as it ran)")
-    if args.source == "policy":  # our policy in this process
+        if args.source != payload["config"]["source_url"]:
+            run_desc = run_desc.replace(f"{args.source} source", f"{args.source} source (served at {payload['config']['source_url']})")
+    if args.source == "policy" and not args.realtime:  # our policy in this process (in real time: served)
         w = payload["config"]["refine_bins_used"]
         passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"
         run_desc += f" (policy: {passes}, {'refine +-' + str(w) + ' bins' if w else 'bin centres'})"
