@@ -43,6 +43,14 @@ FRAME_GAP_S = 0.1
 SOURCE_TIMING_KEYS: tuple[str, ...] = ("round_trip_ms", "server_infer_ms", "policy_infer_ms")
 
 
+def _finite(value) -> float | None:
+    """``value`` as a float if it is a finite real number, else None."""
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    return None
+
+
 def observe(world: World, controller: HybridController, t_s: float, with_image: bool,
             target_prev_pos_m: np.ndarray | None = None, frame_gap_s: float = 0.0,
             prev_image: np.ndarray | None = None) -> Observation:
@@ -305,11 +313,14 @@ class EpisodeRunner:
         """Queue a valid ``chunk`` (answered to ``obs``) to become active ``delay_s`` after its observation (or later,
         when the source says it is late: ``info["arrival_delay_s"]``)."""
         log = self.log
-        log.clipped_actions += chunk.n_clipped
-        for key in SOURCE_TIMING_KEYS:
-            if key in chunk.info:
-                log.source_timing_ms.setdefault(key, []).append(float(chunk.info[key]))
-        delay_s = max(delay_s, float(chunk.info.get("arrival_delay_s", 0.0)))  # a source that knows it is late
+        n_clipped = chunk.n_clipped
+        log.clipped_actions += int(n_clipped) if isinstance(n_clipped, (int, np.integer)) and n_clipped > 0 else 0
+        info = chunk.info if isinstance(chunk.info, dict) else {}  # a source's own notes: never trusted to be well formed
+        for key in SOURCE_TIMING_KEYS:  # what the source says of its timing: numbers only (a server may say None)
+            value = _finite(info.get(key))
+            if value is not None:
+                log.source_timing_ms.setdefault(key, []).append(value)
+        delay_s = max(delay_s, _finite(info.get("arrival_delay_s")) or 0.0)  # a source that knows it is late
         self.intake.submit(obs.t0_s + delay_s, chunk, self.controller.target_estimate(obs.t0_s), obs.ee_pos_m)
 
     def _finish_tick(self) -> None:

@@ -76,3 +76,27 @@ def test_pausing_at_queries_and_answering_from_outside_gives_the_same_episode(wo
     log = runner.finish()
     _same(whole, log)
     assert episode_metrics(log)["final_error_m"] == episode_metrics(whole)["final_error_m"]
+
+
+class _Scribbler:
+    """A source whose chunks carry notes of every wrong kind in ``info`` (as a foreign server may)."""
+
+    needs_image = False
+
+    def __init__(self, inner):
+        self.inner, self.n = inner, 0
+
+    def plan(self, observation):
+        import dataclasses
+
+        self.n += 1
+        infos = [{"round_trip_ms": None, "server_infer_ms": "fast", "arrival_delay_s": float("nan")},
+                 {"policy_infer_ms": float("inf"), "arrival_delay_s": None}, None]
+        return dataclasses.replace(self.inner.plan(observation), info=infos[self.n % 3])
+
+
+def test_malformed_notes_in_a_chunks_info_are_ignored_not_raised(world):
+    source = _Scribbler(make_expert(lead="velocity", world=world))
+    log = run_episode(world, source, HybridController(StackConfig(mode="hybrid", duration_s=3.0, replan_hz=2.0)), seed=0)
+    assert len(log.chunk_active_s) >= 5 and sum(log.rejections.values()) == 0
+    assert log.source_timing_ms == {}  # nothing that was not a finite number was kept
