@@ -298,9 +298,12 @@ class EpisodeRunner:
         """Ask the source (through the executor and the intake) and queue what it answers."""
         t, log, intake, controller = obs.t0_s, self.log, self.intake, self.controller
         scheduled = intake.pending[-1].chunk if intake.pending else (controller.active.chunk if controller.active else None)
-        call = self.executor.request(self.source, obs, QueryContext(t_s=t, latency_s=self.latency_s, scheduled=scheduled))
+        ctx = QueryContext(t_s=t, latency_s=self.latency_s, scheduled=scheduled)
+        executor, source = self.executor, self.source
         p0 = time.perf_counter()
-        chunk = intake.request(call, obs)
+        # the request is built inside the intake's guard too: what it reads of the source (its chunk_dt_s for an
+        # inpainting prefix) is the source's, and may be wrong
+        chunk = intake.request(lambda: executor.request(source, obs, ctx)(), obs)
         log.plan_ms.append((time.perf_counter() - p0) * 1e3)
         if self.record and obs.image is not None:
             log.recording["frames"].append((t, obs.image))

@@ -100,3 +100,22 @@ def test_malformed_notes_in_a_chunks_info_are_ignored_not_raised(world):
     log = run_episode(world, source, HybridController(StackConfig(mode="hybrid", duration_s=3.0, replan_hz=2.0)), seed=0)
     assert len(log.chunk_active_s) >= 5 and sum(log.rejections.values()) == 0
     assert log.source_timing_ms == {}  # nothing that was not a finite number was kept
+
+
+def test_an_inpaint_request_that_fails_on_the_sources_own_members_is_a_counted_rejection(world):
+    class BadSpacing:
+        needs_image = False
+        chunk_dt_s = "a tenth of a second"  # the inpainting prefix is sampled at the source's spacing
+
+        def __init__(self, inner):
+            self.inner = inner
+
+        def plan(self, obs):
+            return self.inner.plan(obs)
+
+        def plan_inpaint(self, obs, known):
+            return self.inner.plan_inpaint(obs, known)
+
+    log = run_episode(world, BadSpacing(make_expert(lead="velocity", world=world)),
+                      HybridController(StackConfig(mode="inpaint", duration_s=2.5)), seed=0)
+    assert log.rejections["source_raised"] >= 2 and len(log.t_s) == 2500  # survived, counted
