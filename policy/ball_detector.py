@@ -60,26 +60,41 @@ class BallDetectorConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
+def _check_images(images: np.ndarray) -> np.ndarray:
+    img = np.asarray(images)
+    if img.dtype != np.uint8 or img.ndim < 3 or img.shape[-1] != 3:
+        raise ValueError(f"images must be uint8 (..., H, W, 3), got {img.shape} {img.dtype}")
+    return img
+
+
+def color_masks(images: np.ndarray, cfg: BallDetectorConfig = BallDetectorConfig()) -> np.ndarray:
+    """bool ``(..., C, H, W)``: the pixels of each colour of ``cfg.colors`` in uint8 frames ``(..., H, W, 3)``."""
+    img = _check_images(images)
+    x = img.astype(np.float32) / 255.0
+    out = []
+    for name in cfg.colors:
+        c = COLOR_CHANNEL[name]
+        main = x[..., c]
+        others = np.maximum(x[..., (c + 1) % 3], x[..., (c + 2) % 3])
+        out.append((main > cfg.min_value) & (main - others > cfg.min_chroma * main))
+    return np.stack(out, axis=-3)
+
+
 def detect_balls(images: np.ndarray, cfg: BallDetectorConfig = BallDetectorConfig()) -> tuple[np.ndarray, np.ndarray]:
     """Colour centroids of uint8 frames ``(..., H, W, 3)``.
 
     Returns ``(uv_px (..., C, 2) float64, n_px (..., C) int64)``: per colour of ``cfg.colors`` the centroid
     ``(u, v)`` (column, row; pixel centres at +0.5) and the pixel count; NaN where fewer than ``min_pixels``.
     """
-    img = np.asarray(images)
-    if img.dtype != np.uint8 or img.ndim < 3 or img.shape[-1] != 3:
-        raise ValueError(f"images must be uint8 (..., H, W, 3), got {img.shape} {img.dtype}")
+    img = _check_images(images)
     lead, (h, w) = img.shape[:-3], img.shape[-3:-1]
-    x = img.reshape(-1, h, w, 3).astype(np.float32) / 255.0
+    masks = color_masks(img.reshape(-1, h, w, 3), cfg)  # (N, C, H, W)
     cols = np.arange(w, dtype=np.float64) + 0.5
     rows = np.arange(h, dtype=np.float64) + 0.5
-    uv = np.full((len(x), len(cfg.colors), 2), np.nan)
-    n = np.zeros((len(x), len(cfg.colors)), dtype=np.int64)
-    for j, name in enumerate(cfg.colors):
-        c = COLOR_CHANNEL[name]
-        main = x[..., c]
-        others = np.maximum(x[..., (c + 1) % 3], x[..., (c + 2) % 3])
-        mask = (main > cfg.min_value) & (main - others > cfg.min_chroma * main)
+    uv = np.full((len(masks), len(cfg.colors), 2), np.nan)
+    n = np.zeros((len(masks), len(cfg.colors)), dtype=np.int64)
+    for j in range(len(cfg.colors)):
+        mask = masks[:, j]
         cnt = mask.sum(axis=(1, 2))
         seen = cnt >= cfg.min_pixels
         n[:, j] = cnt
