@@ -182,3 +182,7 @@ class TrainConfig:
     # inpainting: a share known_prefix_prob of the mm2a samples gets its first U{0..max} waypoints as known tokens
     known_prefix_max_waypoints: int = 0
     known_prefix_prob: float = 0.0
+    # aux target (models with aux_positions > 0): a share aux_known_prob of the mm2a samples gets the ball's true
+    # positions as known tokens (no aux loss there), so the chunk learns to read them; such a checkpoint decodes in
+    # two passes at run time: the positions first, then the chunk given them (policy.decoding.fill_aux)
+    aux_known_prob: float = 0.0

@@ -49,7 +49,7 @@ from policy.bundle import PolicyBundle, make_state_tokenizer
 from policy.checkpoint import CheckpointError
 from policy.config import ImageTokenizerConfig, LossWeights, ModelConfig, TrainConfig
 from policy.dataset import DatasetError, dataset_shards, read_metas, read_shard, split_indices
-from policy.decoding import decode_parallel, target_tokens
+from policy.decoding import decode_parallel, fill_aux, target_tokens
 from policy.image_tokenizer import ImageTokenizer, evaluate_psnr, train_image_tokenizer
 from policy.text_tokenizer import TextTokenizer
 from policy.token_cache import TokenCacheError, load_token_cache, read_header, save_token_cache, tokenizer_fingerprint
@@ -214,7 +214,7 @@ def soft_bin_cross_entropy(logits: torch.Tensor, target: torch.Tensor, sigma_bin
 
 def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_prob: float, device,
               action_sigma_bins: float = 0.0, known_prefix_max: int = 0, known_prefix_prob: float = 0.0,
-              with_aux: bool = False):
+              with_aux: bool = False, aux_known_prob: float = 0.0):
     """The masked-token loss of ``task`` on samples ``idx``; with ``with_aux`` (mm2a) ``(loss, aux loss or None)``:
     the aux target (the ball's 3-D positions) is masked in every query, as at run time, and scored beside the chunk."""
     model = bundle.model
@@ -227,8 +227,13 @@ def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_
         sub[mask] = model.vocab.mask_id
         masked = clean.copy()
         masked[:, lay.target_idx] = sub
-    if len(lay.aux_idx):  # never an input: the query of run time has it masked too
-        masked[:, lay.aux_idx] = model.vocab.mask_id
+    aux_rows = np.ones(len(idx), dtype=bool)  # the rows whose aux target is masked and scored
+    if len(lay.aux_idx):  # masked, as in the query of run time; aux_known_prob: the truth given (the second pass)
+        if aux_known_prob > 0:
+            aux_rows = rng.random(len(idx)) >= aux_known_prob
+        sub = masked[:, lay.aux_idx]
+        sub[aux_rows] = model.vocab.mask_id
+        masked[:, lay.aux_idx] = sub
     lo, _ = model.vocab.range_of(lay.target_modality)
     inp = torch.as_tensor(masked, device=device)
     tgt = torch.as_tensor(clean[:, lay.target_idx] - lo, device=device)
@@ -243,9 +248,12 @@ def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_
         return loss
     if task != "mm2a" or not len(lay.aux_idx):
         return loss, None
+    if not aux_rows.any():
+        return loss, None
     aux_idx = torch.as_tensor(lay.aux_idx, device=device)
-    aux_logits = model.logits(h[:, aux_idx], "action").reshape(-1, model.vocab.range_of("action")[1] - lo)
-    aux_tgt = torch.as_tensor(clean[:, lay.aux_idx] - lo, device=device).reshape(-1)
+    rows = torch.as_tensor(np.flatnonzero(aux_rows), device=device)
+    aux_logits = model.logits(h[rows][:, aux_idx], "action").reshape(-1, model.vocab.range_of("action")[1] - lo)
+    aux_tgt = torch.as_tensor(clean[aux_rows][:, lay.aux_idx] - lo, device=device).reshape(-1)
     sigma = action_sigma_bins if action_sigma_bins > 0 else 0.0
     aux = soft_bin_cross_entropy(aux_logits, aux_tgt, sigma) if sigma else F.cross_entropy(aux_logits.float(), aux_tgt)
     return loss, aux
@@ -254,8 +262,9 @@ def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_
 # ---------------------------------------------------------------- evaluation
 @torch.no_grad()
 def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray, tasks=("mm2a", "t2i", "mmu"),
-             batch: int = 64, t2i_steps: int = 8, mmu_steps: int = 4) -> dict[str, float]:
-    """Held-out figures: action token accuracy and error (m), t2i token accuracy, mmu answer accuracy."""
+             batch: int = 64, t2i_steps: int = 8, mmu_steps: int = 4, aux_first: bool = False) -> dict[str, float]:
+    """Held-out figures: action token accuracy and error (m), t2i token accuracy, mmu answer accuracy; the aux
+    target's errors (m). ``aux_first``: decode the chunk given the predicted aux target (two passes)."""
     model, dev = bundle.model, bundle.device
     model.eval()
     res: dict[str, float] = {"n_eval": int(len(idx))}
@@ -280,7 +289,10 @@ def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray,
                     acc["aux_prev"].append(err[:, 1])
                     dv = (aux_pred[:, 0] - aux_pred[:, 1]) - (aux_true[:, 0] - aux_true[:, 1])
                     acc["aux_disp"].append(np.linalg.norm(dv, axis=-1))
-            out = target_tokens(decode_parallel(model, torch.as_tensor(inp, device=dev), lay, 1), lay).cpu().numpy()
+            query = torch.as_tensor(inp, device=dev)
+            if aux_first:
+                query = fill_aux(model, query, lay)
+            out = target_tokens(decode_parallel(model, query, lay, 1), lay).cpu().numpy()
             truth = clean[:, lay.target_idx]
             acc["act_tok"].append((out == truth).ravel())
             acc["act_bin1"].append((np.abs(out - truth) <= 1).ravel())
@@ -476,7 +488,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
                          warmup_steps=min(200, max(1, (args.steps or 2000) // 10)), weights=w, seed=args.seed,
                          eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins,
                          aux_batch_size=args.aux_batch_size or 0, known_prefix_max_waypoints=args.known_prefix_max,
-                         known_prefix_prob=args.known_prefix_prob)
+                         known_prefix_prob=args.known_prefix_prob, aux_known_prob=args.aux_known_prob)
         new_views = (list(args.cameras or meta["camera_names"]), [float(x) for x in meta.get("frame_offsets_s", [0.0])])
         if (list(bundle.camera_names), list(bundle.frame_offsets_s)) != new_views:
             # a checkpoint trained on other views (e.g. one camera, one frame) fine-tuned on this data: its
@@ -556,7 +568,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
             with torch.autocast(amp_device, dtype=torch.bfloat16, enabled=use_amp):
                 loss, aux = task_loss(bundle, data, task, idx, rng, tc.full_mask_prob_action, device,
                                       tc.action_label_sigma_bins, tc.known_prefix_max_waypoints, tc.known_prefix_prob,
-                                      with_aux=True)
+                                      with_aux=True, aux_known_prob=tc.aux_known_prob)
             total = total + getattr(tc.weights, TASK_WEIGHT[task]) * loss
             losses[task] = float(loss.detach())
             if aux is not None and tc.weights.aux > 0:
@@ -578,7 +590,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     model.eval()
     ev_idx = eval_subset(val_idx, tc.eval_samples, tc.split_seed)
     te = time.perf_counter()
-    figures = evaluate(bundle, data, ev_idx)
+    figures = evaluate(bundle, data, ev_idx, aux_first=bool(bundle.model_cfg.aux_positions) and tc.aux_known_prob > 0)
     figures["eval_wall_s"] = time.perf_counter() - te
     info = {"figures": figures, "n_samples": n, "n_train": int(len(train_idx)), "n_heldout": int(len(val_idx)),
             "final_losses_ema": {k: round(v, 4) for k, v in ema.items()}, "train_config": asdict(tc),
@@ -756,6 +768,10 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--w-aux", type=float, default=None,
                     help="stage 2: weight of the aux target (the instructed ball's 3-D positions) of a model with "
                          "--aux-positions (default 0.5 when it has one)")
+    ap.add_argument("--aux-known-prob", type=float, default=0.0,
+                    help="stage 2: share of the mm2a samples whose aux target (the ball's true positions) is given, "
+                         "so the chunk learns to read it; the checkpoint then decodes in two passes (positions, then "
+                         "the chunk). Default 0: one pass, the aux target only shapes what the model computes")
     ap.add_argument("--cameras", nargs="+", default=None, metavar="NAME",
                     help="stages 1/2: train on these cameras of the data (in this order; default: all of the data's)")
     ap.add_argument("--ball-tokens", type=int, choices=(0, 1), default=None,
