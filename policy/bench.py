@@ -64,7 +64,8 @@ def run_bench(policy: MMActPolicy, repeats: int = 30, ar_repeats: int = 3, k: in
         "frame_offsets_s": list(policy.bundle.frame_offsets_s),
     }
     with torch.no_grad():
-        res["mm2a_ms"] = _time(lambda: decode_parallel(m, toks, lay, 1), repeats)
+        res["mm2a_ms"] = _time(lambda: policy.decode_mm2a(toks, lay, 1), repeats)  # two passes for an aux-first model
+        res["mm2a_passes"] = 2 if policy.aux_first else 1
         res["k_step_ms"] = {**_time(lambda: decode_parallel(m, toks, lay, k), max(5, repeats // 3)), "k": k}
         res["autoregressive_ms"] = _time(lambda: decode_autoregressive(m, toks, lay), ar_repeats, warmup=1)
         res["predict_chunk_ms"] = _time(lambda: policy.predict_chunk(img, instr, q), repeats)
@@ -72,8 +73,8 @@ def run_bench(policy: MMActPolicy, repeats: int = 30, ar_repeats: int = 3, k: in
         res["predict_chunk_bin_centres_ms"] = _time(lambda: policy.predict_chunk(img, instr, q, refine_bins=0), repeats)
         res["views"] = {}
         for v in views:
-            if v > policy.bundle.model_cfg.max_views:
-                continue
+            if v > policy.bundle.model_cfg.max_views or policy.bundle.model_cfg.ball_views:
+                continue  # a model with ball tokens takes its own views only
             imv = rng.integers(0, 256, size=(v, s, s, 3), dtype=np.uint8)
             t, ly = policy.mm2a_batch(imv, instr, q)
             res["views"][str(v)] = {"sequence_length": ly.length, "mm2a_ms": _time(lambda: decode_parallel(m, t, ly, 1), repeats),

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from policy.action_tokenizer import ActionBounds, ActionTokenizer
+from policy.ball_detector import BallDetectorConfig, BallTokenizer, detect_balls
 from policy.checkpoint import (
     CheckpointError, cpu_state, load_checkpoint, load_state_strict, save_checkpoint, tokenizer_dict, tokenizer_from_dict,
 )
@@ -45,6 +46,11 @@ class PolicyBundle:
     #: capture times of the frames an mm2a query holds, relative to the observation (s, 0 first; e.g. [0, -0.1]):
     #: the views are ordered frame-major, ``[cam0@0, cam1@0, cam0@-0.1, cam1@-0.1]``
     frame_offsets_s: list[float] = field(default_factory=lambda: [0.0])
+    #: how the balls are found in the frames (``policy.ball_detector``); it makes the ball tokens of a model with
+    #: ``ball_views > 0`` and of every token cache (``policy.token_cache``)
+    ball_detector: BallDetectorConfig = field(default_factory=BallDetectorConfig)
+    #: frames whose VQ codes enter an mm2a query (the first k of ``frame_offsets_s``); 0 = all of them
+    mm2a_image_frames: int = 0
     _builder: LayoutBuilder | None = None
 
     # ---- construction ---------------------------------------------------
@@ -57,6 +63,7 @@ class PolicyBundle:
             raise ValueError(f"text tokenizer has {self.text_tokenizer.vocab_size} ids > text_size {model_cfg.text_size}")
         self.model_cfg = model_cfg
         self.model = model if model is not None else MMActModel(model_cfg)
+        self.model.cfg = model_cfg  # a layout switch (policy.train.set_layout) keeps the weights
         self._builder = None
         return self.model
 
@@ -72,6 +79,12 @@ class PolicyBundle:
     def n_views(self) -> int:
         """Views of an mm2a query: cameras x frames (t2i and mmu see the current frame of each camera only)."""
         return len(self.camera_names) * len(self.frame_offsets_s)
+
+    @property
+    def mm2a_image_views(self) -> int:
+        """Views whose VQ codes an mm2a query holds: cameras x the first ``mm2a_image_frames`` frames."""
+        frames = self.mm2a_image_frames or len(self.frame_offsets_s)
+        return len(self.camera_names) * min(frames, len(self.frame_offsets_s))
 
     def to(self, device: str | torch.device) -> "PolicyBundle":
         self.image_tokenizer.to(device)
@@ -103,6 +116,34 @@ class PolicyBundle:
         codes = np.concatenate(out) if out else np.zeros((0, self.image_cfg.grid, self.image_cfg.grid), np.int64)
         return codes.reshape(n, v, self.image_cfg.grid, self.image_cfg.grid)
 
+    def ball_tokens(self, images: np.ndarray) -> np.ndarray:
+        """uint8 frames ``(N, V, H, W, 3)`` -> ball tokens ``(N, V, colours, 2)`` int64 (``policy.ball_detector``:
+        each colour's centroid u, v in the state bins over the frame's width, ``<|pad|>`` where not seen)."""
+        images = np.asarray(images)
+        if images.ndim != 5 or images.dtype != np.uint8 or images.shape[-1] != 3:
+            raise ValueError(f"images must be uint8 (N, V, H, W, 3), got {images.shape} {images.dtype}")
+        uv, _ = detect_balls(images, self.ball_detector)
+        vocab = vocab_of(self.model_cfg) if self.model_cfg else None
+        offset = vocab.action_offset if vocab else self.action_tokenizer.token_offset
+        tok = BallTokenizer(int(images.shape[-2]), self.action_tokenizer.bins, offset,
+                            vocab.pad_id if vocab else 0)
+        return tok.encode(uv)
+
+    def aux_tokens(self, pos_m: np.ndarray) -> np.ndarray:
+        """3-D positions ``(..., 3)`` (m) -> tokens ``(..., 3)`` of the action bins of x, y, z."""
+        pos = np.asarray(pos_m, dtype=np.float64)
+        full = np.zeros((*pos.shape[:-1], 7))
+        full[..., :3] = pos
+        full[..., 6] = self.action_tokenizer.low[6]
+        return self.action_tokenizer.encode(full)[0][..., :3]
+
+    def aux_positions_m(self, bins: np.ndarray) -> np.ndarray:
+        """(Fractional) bin indices ``(..., 3)`` of the aux target -> positions (m), bin centres for integers."""
+        b = np.asarray(bins, dtype=np.float64)
+        full = np.zeros((*b.shape[:-1], 7))
+        full[..., :3] = b
+        return self.action_tokenizer.decode_fractional(full)[..., :3]
+
     def state_tokens(self, q_rad: np.ndarray) -> np.ndarray:
         return self.state_tokenizer.encode(np.asarray(q_rad, dtype=np.float64))[0]
 
@@ -111,7 +152,7 @@ class PolicyBundle:
 
     # ---- persistence ------------------------------------------------------
     def payload(self, info: dict[str, Any] | None = None) -> dict[str, Any]:
-        return {
+        out = {
             "model_config": self.model_cfg.to_dict() if self.model_cfg else None,
             "image_tokenizer_config": self.image_cfg.to_dict(),
             "action_tokenizer": tokenizer_dict(self.action_tokenizer),
@@ -124,6 +165,12 @@ class PolicyBundle:
             "image_tokenizer_state": cpu_state(self.image_tokenizer),
             "info": dict(info if info is not None else self.info),
         }
+        cfg = self.model_cfg
+        if (cfg and (cfg.ball_views or cfg.aux_positions)) or self.mm2a_image_frames or self.ball_detector != BallDetectorConfig():
+            # issue 25's layouts; a checkpoint made before them re-saves byte for byte without these keys
+            out["ball_detector"] = self.ball_detector.to_dict()
+            out["mm2a_image_frames"] = int(self.mm2a_image_frames)
+        return out
 
     def save(self, path: str | Path, info: dict[str, Any] | None = None) -> Path:
         return save_checkpoint(path, self.payload(info))
@@ -142,6 +189,7 @@ class PolicyBundle:
             text_tok = TextTokenizer.from_json(p["text_tokenizer_json"])
             action_tok = tokenizer_from_dict(p["action_tokenizer"])
             state_tok = tokenizer_from_dict(p["state_tokenizer"])
+            detector = BallDetectorConfig.from_dict(p["ball_detector"]) if p.get("ball_detector") else BallDetectorConfig()
         except CheckpointError:
             raise
         except Exception as e:
@@ -151,7 +199,8 @@ class PolicyBundle:
         img.eval()
         b = cls(image_cfg, img, text_tok, action_tok, state_tok, float(p["chunk_dt_s"]),
                 camera_names=list(p.get("camera_names") or ["front"]), info=dict(p.get("info") or {}),
-                frame_offsets_s=[float(x) for x in (p.get("frame_offsets_s") or [0.0])])
+                frame_offsets_s=[float(x) for x in (p.get("frame_offsets_s") or [0.0])], ball_detector=detector,
+                mm2a_image_frames=int(p.get("mm2a_image_frames") or 0))
         if model_cfg is None or p["model_state"] is None:
             if require_model:
                 raise CheckpointError(f"{path} holds no model weights (a stage-0 image/text tokenizer checkpoint)")

@@ -91,6 +91,12 @@ class ModelConfig:
         max_views: most camera views one sequence may hold.
         horizon: action chunk length H (waypoints).
         action_dim / state_dim: 7 and 7.
+        ball_views: views (cameras x frames) whose balls enter an mm2a query as sub-pixel image positions
+            (``policy.ball_detector``: u, v per colour per view, in the state bins); 0 = none (the layouts before
+            issue 25).
+        ball_colors: ball colours per view (token order of the detector's ``colors``).
+        aux_positions: 3-D positions of the instructed ball an mm2a query predicts beside its chunk, as an
+            auxiliary masked target in the action bins (1: at t; 2: at t and at the earlier frame); 0 = none.
     """
 
     text_size: int = 512
@@ -108,6 +114,9 @@ class ModelConfig:
     horizon: int = 16
     action_dim: int = 7
     state_dim: int = 7
+    ball_views: int = 0
+    ball_colors: int = 2
+    aux_positions: int = 0
 
     def __post_init__(self) -> None:
         if self.d_model % self.n_heads:
@@ -115,6 +124,12 @@ class ModelConfig:
         for name in ("grid", "max_text_len", "max_answer_len", "horizon", "action_dim", "state_dim"):
             if not 1 <= getattr(self, name) <= 64:
                 raise ValueError(f"ModelConfig.{name} must be in [1, 64], got {getattr(self, name)}")
+        if not 0 <= self.ball_views <= self.max_views:
+            raise ValueError(f"ModelConfig.ball_views must be in [0, max_views={self.max_views}], got {self.ball_views}")
+        if not 1 <= self.ball_colors <= 8:
+            raise ValueError(f"ModelConfig.ball_colors must be in [1, 8], got {self.ball_colors}")
+        if not 0 <= self.aux_positions <= 4:
+            raise ValueError(f"ModelConfig.aux_positions must be in [0, 4], got {self.aux_positions}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -126,11 +141,13 @@ class ModelConfig:
 
 @dataclass(frozen=True)
 class LossWeights:
-    """Per-task loss weights: action (mm2a), text (mmu answers), image (t2i future codes)."""
+    """Per-task loss weights: action (mm2a), text (mmu answers), image (t2i future codes), and aux: the mm2a
+    query's auxiliary target (the instructed ball's 3-D positions; only models with ``aux_positions > 0``)."""
 
     action: float = 1.0
     text: float = 0.05
     image: float = 0.05
+    aux: float = 0.0
 
     @classmethod
     def for_stage(cls, stage: int) -> "LossWeights":
@@ -165,3 +182,7 @@ class TrainConfig:
     # inpainting: a share known_prefix_prob of the mm2a samples gets its first U{0..max} waypoints as known tokens
     known_prefix_max_waypoints: int = 0
     known_prefix_prob: float = 0.0
+    # aux target (models with aux_positions > 0): a share aux_known_prob of the mm2a samples gets the ball's true
+    # positions as known tokens (no aux loss there), so the chunk learns to read them; such a checkpoint decodes in
+    # two passes at run time: the positions first, then the chunk given them (policy.decoding.fill_aux)
+    aux_known_prob: float = 0.0

@@ -3,7 +3,8 @@
 A directory with ``meta.json`` and shards ``shard_XXXX.npz``; each shard holds N_i samples of
 ``images (N,V,H,W,3) uint8``, ``future_images (N,C,H,W,3)``, ``q_rad (N,7)``, ``actions (N,16,7)``
 (float, not quantized), ``instructions``, ``questions``, ``answers`` (str), ``target_index (N,)``,
-``target_pos_m (N,3)``. Every problem is reported with the file and field it concerns.
+``target_pos_m (N,3)`` and, collected since issue 25, ``target_prev_pos_m (N,3)`` (the instructed ball where the
+earlier frame was taken; the current position when there is none). Every problem is reported with the file and field it concerns.
 
 Views: ``C = len(camera_names)`` cameras and, when ``meta.json`` has ``frame_offsets_s`` (e.g. ``[0.0, -0.1]``: the
 frame of the observation and one 0.1 s earlier), ``V = C x len(frame_offsets_s)`` frames ordered frame-major
@@ -24,6 +25,8 @@ META_KEYS = ("image_size_px", "camera_names", "chunk_horizon", "chunk_dt_s", "ac
 SHARD_FIELDS = (
     "images", "future_images", "q_rad", "actions", "instructions", "questions", "answers", "target_index", "target_pos_m",
 )
+#: fields a shard may hold (collected since issue 25): the instructed ball where the earlier frame was taken
+OPTIONAL_FIELDS = ("target_prev_pos_m",)
 
 
 class DatasetError(ValueError):
@@ -98,6 +101,7 @@ def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
             if missing:
                 raise DatasetError(f"{shard}: missing fields {missing}")
             data = {f: z[f] for f in SHARD_FIELDS}
+            data.update({f: z[f] for f in OPTIONAL_FIELDS if f in z.files})
     except DatasetError:
         raise
     except Exception as e:  # zip / pickle / truncation errors
@@ -108,9 +112,10 @@ def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
     expect = {
         "images": (n, v, s, s, 3), "future_images": (n, c, s, s, 3), "q_rad": (n, 7), "actions": (n, h, 7),
         "instructions": (n,), "questions": (n,), "answers": (n,), "target_index": (n,), "target_pos_m": (n, 3),
+        "target_prev_pos_m": (n, 3),
     }
     for f, shape in expect.items():
-        if data[f].shape != shape:
+        if f in data and data[f].shape != shape:
             raise DatasetError(f"{shard}: field {f!r} has shape {data[f].shape}, expected {shape}")
     for f in ("images", "future_images"):
         if data[f].dtype != np.uint8:
@@ -119,8 +124,8 @@ def read_shard(shard: Path, meta: dict[str, Any]) -> dict[str, np.ndarray]:
         if data[f].dtype.kind not in "UO":
             raise DatasetError(f"{shard}: field {f!r} must hold strings, got {data[f].dtype}")
         data[f] = data[f].astype(str)
-    for f in ("q_rad", "actions", "target_pos_m"):
-        if not np.all(np.isfinite(data[f])):
+    for f in ("q_rad", "actions", "target_pos_m", *OPTIONAL_FIELDS):
+        if f in data and not np.all(np.isfinite(data[f])):
             raise DatasetError(f"{shard}: field {f!r} contains NaN or inf")
     return data
 

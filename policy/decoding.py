@@ -11,6 +11,7 @@ holds only tokens of that kind. Decoding is greedy (argmax), hence deterministic
 - ``expected_bins``: optional sub-bin refinement of an action token from its logits (the local
   probability-weighted mean around the chosen bin), for detokenizing to continuous values.
 - ``decode_autoregressive``: one position per forward pass, left to right, for comparison.
+- ``fill_aux``: the first pass of a checkpoint trained to read its own aux target (the ball's 3-D positions).
 """
 
 from __future__ import annotations
@@ -113,6 +114,20 @@ def expected_bins(logits: torch.Tensor, chosen: torch.Tensor, window: int) -> to
     near = (bins - chosen[..., None].float()).abs() <= window
     w = prob * near
     return ((w * bins).sum(-1) / w.sum(-1).clamp_min(1e-30)).to(torch.float64)
+
+
+@torch.no_grad()
+def fill_aux(model: MMActModel, tokens: torch.Tensor, layout: SeqLayout) -> torch.Tensor:
+    """The first pass of a two-pass mm2a query: the aux target (the ball's 3-D positions) filled with its greedy
+    tokens from one forward pass; the chunk is then decoded given them. A layout without an aux target: unchanged."""
+    if not len(layout.aux_idx):
+        return tokens
+    idx = torch.as_tensor(layout.aux_idx, device=tokens.device)
+    lo, _ = model.vocab.range_of("action")
+    out = tokens.clone()
+    h = model.hidden(out, layout)
+    out[:, idx] = model.logits(h[:, idx], "action").argmax(-1) + lo
+    return out
 
 
 def target_tokens(tokens: torch.Tensor, layout: SeqLayout) -> torch.Tensor:

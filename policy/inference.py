@@ -20,6 +20,7 @@ from policy.decoding import (
     decode_parallel,
     decode_parallel_logits,
     expected_bins,
+    fill_aux,
     target_tokens,
 )
 
@@ -69,11 +70,24 @@ class MMActPolicy:
         return round(REFINE_WINDOW_SIGMAS * sigma) if np.isfinite(sigma) and sigma > 0 else 0
 
     @property
+    def aux_first(self) -> bool:
+        """Whether an mm2a query fills the aux target (the ball's 3-D positions) in a first pass and decodes the chunk
+        given it: checkpoints trained with ``aux_known_prob > 0`` (they learned to read those tokens)."""
+        tc = self.bundle.info.get("train_config") or {}
+        return bool(self.bundle.model_cfg.aux_positions) and float(tc.get("aux_known_prob") or 0.0) > 0
+
+    def decode_mm2a(self, toks: torch.Tensor, lay, action_steps: int = 1):
+        """The mm2a call itself (what the benchmark times): ``(filled tokens, logits of the chunk)``."""
+        if self.aux_first:
+            toks = fill_aux(self.model, toks, lay)
+        return decode_parallel_logits(self.model, toks, lay, action_steps)
+
+    @property
     def device(self) -> torch.device:
         return self.bundle.device
 
     # ---- input handling ----------------------------------------------------
-    def _codes(self, images: np.ndarray) -> np.ndarray:
+    def _views(self, images: np.ndarray) -> np.ndarray:
         img = np.asarray(images)
         if img.ndim == 3:
             img = img[None]
@@ -81,7 +95,10 @@ class MMActPolicy:
             raise ValueError(f"images must be uint8 (V, H, W, 3), got {img.shape} {img.dtype}")
         if not 1 <= img.shape[0] <= self.bundle.model_cfg.max_views:
             raise ValueError(f"got {img.shape[0]} views; this model takes 1..{self.bundle.model_cfg.max_views}")
-        return self.bundle.image_codes(img[None])  # (1, V, g, g)
+        return img
+
+    def _codes(self, images: np.ndarray) -> np.ndarray:
+        return self.bundle.image_codes(self._views(images)[None])  # (1, V, g, g)
 
     def _text(self, text: str) -> np.ndarray:
         return self.bundle.text_batch([text], self.bundle.model_cfg.max_text_len)
@@ -93,7 +110,15 @@ class MMActPolicy:
         if q.shape != (self.bundle.model_cfg.state_dim,):
             raise ValueError(f"q_rad must have {self.bundle.model_cfg.state_dim} values, got shape {np.shape(q_rad)}")
         state = self.bundle.state_tokens(q[None])
-        toks, lay = self.bundle.builder.fill("mm2a", self._text(instruction), self._codes(images), state, None)
+        views = self._views(images)
+        cfg, balls = self.bundle.model_cfg, None
+        n_img = min(self.bundle.mm2a_image_views, len(views)) if self.bundle.mm2a_image_frames else len(views)
+        if cfg.ball_views:  # the balls of every view, found in these very frames (policy.ball_detector)
+            if len(views) != cfg.ball_views:
+                raise ValueError(f"this model takes {cfg.ball_views} views (cameras x frames), got {len(views)}")
+            balls = self.bundle.ball_tokens(views[None]).reshape(1, -1)
+        codes = self.bundle.image_codes(views[None, :n_img])
+        toks, lay = self.bundle.builder.fill("mm2a", self._text(instruction), codes, state, None, ball_tokens=balls)
         if known_actions is not None:
             h, d = self.horizon, self.bundle.model_cfg.action_dim
             known = np.asarray(known_actions)
@@ -130,7 +155,7 @@ class MMActPolicy:
         if refine_bins < 0:
             raise ValueError(f"refine_bins must be >= 0, got {refine_bins}")
         toks, lay = self.mm2a_batch(images, instruction, q_rad, known_actions)
-        filled, logits = decode_parallel_logits(self.model, toks, lay, action_steps)
+        filled, logits = self.decode_mm2a(toks, lay, action_steps)
         out = target_tokens(filled, lay)[0]
         tokens = out.cpu().numpy().reshape(self.horizon, -1).astype(np.int64)
         if refine_bins == 0 or logits is None:
@@ -140,6 +165,18 @@ class MMActPolicy:
         refined = expected_bins(logits[0], out - lo, refine_bins).cpu().numpy().reshape(bins.shape)
         known = np.asarray(known_actions) >= 0 if known_actions is not None else np.zeros(bins.shape, bool)
         return tokens, self.action_tokenizer.decode_fractional(np.where(known, bins, refined))
+
+    @torch.no_grad()
+    def predict_ball_positions(self, images: np.ndarray, instruction: str, q_rad: np.ndarray) -> np.ndarray:
+        """The aux target of a model with ``aux_positions > 0``: where it says the instructed ball is (at t, then at
+        the earlier frame), ``(P, 3)`` m, from the same query as ``predict_chunk`` (probability-weighted bins)."""
+        if not self.bundle.model_cfg.aux_positions:
+            raise ValueError("this checkpoint has no auxiliary ball-position target")
+        toks, lay = self.mm2a_batch(images, instruction, q_rad)
+        h = self.model.hidden(toks, lay)
+        logits = self.model.logits(h[:, torch.as_tensor(lay.aux_idx, device=toks.device)], "action")[0]
+        bins = expected_bins(logits[None], logits.argmax(-1)[None], max(self.default_refine_bins, 0))[0].cpu().numpy()
+        return self.bundle.aux_positions_m(bins.reshape(-1, 3))
 
     @torch.no_grad()
     def predict_chunk_autoregressive(self, images: np.ndarray, instruction: str, q_rad: np.ndarray

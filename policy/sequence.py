@@ -4,7 +4,7 @@ Every sequence is ``[task token | segments... | target segment]``, each segment 
 markers (``<|sot|> ... <|eot|>``, ``<|soi|> ... <|eoi|>``, ``<|sos|> ... <|eos|>``,
 ``<|soa|> ... <|eoa|>``)::
 
-    mm2a: <|mm2a|> [text] [image]*V [state] [ACTION CHUNK H*7]
+    mm2a: <|mm2a|> [text] [image]*V ([balls]) [state] ([AUX]) [ACTION CHUNK H*7]
     t2i:  <|t2i|>  [text] [image]*V [FUTURE IMAGE]*V
     mmu:  <|mmu|>  [image]*V [question text] [ANSWER TEXT]
 
@@ -14,6 +14,18 @@ layout's position ids are shared by the whole batch. Position ids are per segmen
 token, the step of an action token; ``b`` is the column of an image code or the dimension of an
 action token; ``view`` is 1 + the camera index for image tokens (0 otherwise). The model adds a
 learned embedding per ``(type, a)``, per ``(type, b)`` and per ``view``: 2D positions for images.
+
+Two optional mm2a segments (issue 25; a model without them has exactly the layouts before it), both numeric tokens
+of the state bins, so they share the state's segment type and markers (``<|sos|> ... <|eos|>``) and are told apart
+by ``a``:
+
+- ``balls`` (``ModelConfig.ball_views > 0``), an input: per view (the ``view`` id, as the images have) and per ball
+  colour the ball's image position ``u, v`` (``policy.ball_detector``), ``a = BALL_A + 2 * colour + coordinate``;
+  ``<|pad|>`` where the ball is not seen.
+- ``aux`` (``ModelConfig.aux_positions > 0``), a second target: the instructed ball's 3-D position (x, y, z in the
+  action bins) at t, then at the earlier frame, ``a = AUX_A + coordinate``, ``b = 1 + position``. It is masked in
+  every query and predicted in the same pass as the chunk (``SeqLayout.aux_idx``), so the chunk's hidden states
+  must carry where the ball is.
 """
 
 from __future__ import annotations
@@ -32,6 +44,8 @@ TARGET_MODALITY = {"mm2a": "action", "t2i": "image", "mmu": "text"}
 T_TASK, T_MARK, T_TEXT, T_IMAGE, T_STATE, T_ACTION, T_ANSWER, T_FUTURE = range(8)
 N_TYPES = 8
 MAX_POS = 64  # per-type index range of a and b
+AUX_A = 8  # a of the aux target's x (state dims are a = 0..6)
+BALL_A = 16  # a of the first ball token of a view
 
 
 @dataclass
@@ -65,6 +79,12 @@ class SeqLayout:
             else:
                 self._torch["target_idx"] = np.arange(self.target.start, self.target.stop)
         return self._torch["target_idx"]
+
+    @property
+    def aux_idx(self) -> np.ndarray:
+        """Absolute positions of the auxiliary target (the ball's 3-D positions; empty without one)."""
+        aux = self.slots.get("aux")
+        return np.arange(aux.start, aux.stop) if aux is not None else np.zeros(0, dtype=np.int64)
 
     @property
     def target_modality(self) -> str:
@@ -131,7 +151,23 @@ class LayoutBuilder:
         for i in range(n_views):
             segment(f"image{i}", "<|soi|>", "<|eoi|>", T_IMAGE, g2, grid=c.grid, view=i + 1)
         if task == "mm2a":
+            if c.ball_views:
+                mark("<|sos|>")
+                s = len(tok)
+                for view in range(c.ball_views):
+                    for k in range(2 * c.ball_colors):
+                        put(v.pad_id, T_STATE, BALL_A + k, 0, view + 1)
+                slots["balls"] = slice(s, len(tok))
+                mark("<|eos|>")
             segment("state", "<|sos|>", "<|eos|>", T_STATE, c.state_dim)
+            if c.aux_positions:
+                mark("<|sos|>")
+                s = len(tok)
+                for pos in range(c.aux_positions):
+                    for k in range(3):
+                        put(v.pad_id, T_STATE, AUX_A + k, 1 + pos)
+                slots["aux"] = slice(s, len(tok))
+                mark("<|eos|>")
             segment("target", "<|soa|>", "<|eoa|>", T_ACTION, c.horizon * c.action_dim, cols=c.action_dim)
         elif task == "t2i":
             start = len(tok)
@@ -153,6 +189,8 @@ class LayoutBuilder:
         image_codes: np.ndarray,
         state_tokens: np.ndarray | None = None,
         target_tokens: np.ndarray | None = None,
+        ball_tokens: np.ndarray | None = None,
+        aux_tokens: np.ndarray | None = None,
     ) -> tuple[np.ndarray, SeqLayout]:
         """Batch ``(B, L)`` of shared-vocabulary ids.
 
@@ -163,6 +201,8 @@ class LayoutBuilder:
             target_tokens: shared-vocabulary ids of the target, flat ``(B, T)`` (or shaped);
                 ``None`` fills the target with ``<|mask|>``. For t2i the target is the future
                 codes of all views in order (markers between views are kept from the template).
+            ball_tokens: ``(B, ball_views * ball_colors * 2)`` shared-vocabulary ids (mm2a with ball tokens).
+            aux_tokens: ``(B, aux_positions * 3)`` ids of the auxiliary target; ``None`` masks it (every query).
         """
         v = self.vocab
         image_codes = np.asarray(image_codes)
@@ -178,5 +218,11 @@ class LayoutBuilder:
             if state_tokens is None:
                 raise ValueError("mm2a needs state tokens")
             out[:, lay.slots["state"]] = np.asarray(state_tokens).reshape(b, -1)
+            if "balls" in lay.slots:
+                if ball_tokens is None:
+                    raise ValueError("this model's mm2a query needs ball tokens (policy.ball_detector)")
+                out[:, lay.slots["balls"]] = np.asarray(ball_tokens).reshape(b, -1)
+            if "aux" in lay.slots:
+                out[:, lay.slots["aux"]] = v.mask_id if aux_tokens is None else np.asarray(aux_tokens).reshape(b, -1)
         out[:, lay.target_idx] = v.mask_id if target_tokens is None else np.asarray(target_tokens).reshape(b, -1)
         return out, lay

@@ -10,8 +10,10 @@ accelerator machine that has torch but neither the frames nor MuJoCo (``docs/pol
     python -m policy.train --tokens-cache tokens.npz --stage 2 --init CKPT --out OUT ...
 
 The fingerprint covers everything that fixes a token id: the image tokenizer's weights, the text tokenizer, the
-action and state tokenizers, the views (cameras x frame offsets) and the text lengths of the model config. A cache
-made with other tokenizers is refused with both fingerprints named, never trained on.
+action and state tokenizers, the ball detector (``policy.ball_detector``: every cache holds each view's ball tokens),
+the views (cameras x frame offsets) and the text lengths of the model config. A cache made with other tokenizers is
+refused with both fingerprints named, never trained on. Caches of one frozen tokenizer accumulate: the data of each
+new collection (a DAgger round) is cached alone and trained on beside the earlier ones (``--tokens-cache A B ...``).
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ import numpy as np
 from policy.checkpoint import cpu_state, tokenizer_dict, weights_digest
 
 FORMAT = "mmact-ctrl/token-cache"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2 (issue 25): + ball (the detector's ball tokens per view) and target_prev_pos_m
 #: the arrays ``policy.train.load_tokenized`` returns (and the cache must hold)
-FIELDS = ("img", "fut", "instr", "quest", "answer", "answer_str", "state", "action", "actions_f", "target_pos_m", "source")
+FIELDS = ("img", "fut", "instr", "quest", "answer", "answer_str", "state", "action", "actions_f", "target_pos_m", "source",
+          "ball", "target_prev_pos_m")
 
 
 class TokenCacheError(ValueError):
@@ -45,7 +48,8 @@ def tokenizer_fingerprint(bundle) -> str:
     cfg = bundle.model_cfg
     layout = {"action": tokenizer_dict(bundle.action_tokenizer), "state": tokenizer_dict(bundle.state_tokenizer),
               "cameras": list(bundle.camera_names), "frame_offsets_s": [float(x) for x in bundle.frame_offsets_s],
-              "max_text_len": cfg.max_text_len if cfg else None, "max_answer_len": cfg.max_answer_len if cfg else None}
+              "max_text_len": cfg.max_text_len if cfg else None, "max_answer_len": cfg.max_answer_len if cfg else None,
+              "ball_detector": bundle.ball_detector.to_dict()}
     h.update(json.dumps(layout, sort_keys=True, default=str).encode())
     return h.hexdigest()
 
@@ -119,6 +123,8 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--checkpoint", required=True,
                     help="the stage-1/2 checkpoint whose tokenizers make the tokens (the --init of the training run)")
     ap.add_argument("--out", required=True, help="cache file to write (.npz)")
+    ap.add_argument("--cameras", nargs="+", default=None, metavar="NAME",
+                    help="cache the views of these cameras of the data (default: the checkpoint's, else the data's)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     from policy.bundle import PolicyBundle
@@ -129,9 +135,11 @@ def main(argv: list[str] | None = None) -> Path:
     try:
         meta = read_metas(args.data)
         bundle = PolicyBundle.load(args.checkpoint, "cpu", require_model=True)
-        check_data_matches(bundle, meta, args.checkpoint)
+        cams = args.cameras or (list(bundle.camera_names) if set(bundle.camera_names) <= set(meta["camera_names"])
+                                else list(meta["camera_names"]))
+        check_data_matches(bundle, meta, args.checkpoint, cams)
         # as policy.train does for a checkpoint fine-tuned on other views: the data's views become the layout
-        bundle.camera_names = list(meta["camera_names"])
+        bundle.camera_names = cams
         bundle.frame_offsets_s = [float(x) for x in meta.get("frame_offsets_s", [0.0])]
         data = load_tokenized(bundle, args.data, not args.no_progress)
     except (DatasetError, CheckpointError) as exc:

@@ -49,7 +49,7 @@ from policy.bundle import PolicyBundle, make_state_tokenizer
 from policy.checkpoint import CheckpointError
 from policy.config import ImageTokenizerConfig, LossWeights, ModelConfig, TrainConfig
 from policy.dataset import DatasetError, dataset_shards, read_metas, read_shard, split_indices
-from policy.decoding import decode_parallel, target_tokens
+from policy.decoding import decode_parallel, fill_aux, target_tokens
 from policy.image_tokenizer import ImageTokenizer, evaluate_psnr, train_image_tokenizer
 from policy.text_tokenizer import TextTokenizer
 from policy.token_cache import TokenCacheError, load_token_cache, read_header, save_token_cache, tokenizer_fingerprint
@@ -69,13 +69,19 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
     read_metas(data_path)  # the directories must agree on the token layout
     cfg = bundle.model_cfg
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("img", "fut", "instr", "quest", "answer", "answer_str", "state",
-                                                           "action", "actions_f", "target_pos_m", "source")}
+                                                           "action", "actions_f", "target_pos_m", "source", "ball",
+                                                           "target_prev_pos_m")}
     for k, shard, meta in tqdm(dataset_shards(data_path), desc="tokenizing shards", disable=not progress):
-        check_views(bundle, meta, shard)
+        views, future = check_views(bundle, meta, shard)
         d = read_shard(shard, meta)
+        images = d["images"][:, views]
         parts["source"].append(np.full(len(d["q_rad"]), k, dtype=np.int16))
-        parts["img"].append(bundle.image_codes(d["images"]).astype(np.int16))
-        parts["fut"].append(bundle.image_codes(d["future_images"]).astype(np.int16))
+        parts["img"].append(bundle.image_codes(images).astype(np.int16))
+        parts["fut"].append(bundle.image_codes(d["future_images"][:, future]).astype(np.int16))
+        parts["ball"].append(bundle.ball_tokens(images).astype(np.int16))
+        prev = d.get("target_prev_pos_m")
+        parts["target_prev_pos_m"].append(np.full((len(d["q_rad"]), 3), np.nan, np.float32) if prev is None
+                                          else prev.astype(np.float32))
         parts["instr"].append(bundle.text_batch(d["instructions"], cfg.max_text_len))
         parts["quest"].append(bundle.text_batch(d["questions"], cfg.max_text_len))
         parts["answer"].append(bundle.text_batch(d["answers"], cfg.max_answer_len, end_with_eot=True))
@@ -87,29 +93,46 @@ def load_tokenized(bundle: PolicyBundle, data_path: str | list[str], progress: b
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
-def training_tokens(bundle: PolicyBundle, args) -> dict[str, np.ndarray]:
-    """The token arrays of ``--data``, read from ``--tokens-cache`` when that file exists (and was made by this
-    bundle's tokenizers), else tokenized from the frames (and written to ``--tokens-cache`` when one is named)."""
+def _caches(args) -> list[str]:
     cache = getattr(args, "tokens_cache", None)
-    if cache and Path(cache).is_file():
-        try:
-            data, _ = load_token_cache(cache, bundle)
-        except TokenCacheError as exc:
-            raise SystemExit(f"--tokens-cache: {exc}") from None
-        return data
+    return [cache] if isinstance(cache, str) else list(cache or [])
+
+
+def training_tokens(bundle: PolicyBundle, args) -> dict[str, np.ndarray]:
+    """The token arrays of ``--data``, read from the ``--tokens-cache`` file(s) when they exist (and were made by this
+    bundle's tokenizers; several are concatenated, each keeping its directories' ``source`` indices in the order of
+    ``args.data``), else tokenized from the frames (and written to the one ``--tokens-cache`` when one is named)."""
+    caches = _caches(args)
+    if caches and all(Path(c).is_file() for c in caches):
+        parts, n_dirs = [], 0
+        for c in caches:
+            try:
+                data, header = load_token_cache(c, bundle)
+            except TokenCacheError as exc:
+                raise SystemExit(f"--tokens-cache: {exc}") from None
+            data["source"] = (data["source"].astype(np.int64) + n_dirs).astype(np.int16)
+            n_dirs += len(header["data_paths"])
+            parts.append(data)
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]} if len(parts) > 1 else parts[0]
     data = load_tokenized(bundle, args.data, not args.no_progress)
-    if cache:
-        save_token_cache(cache, data, read_metas(args.data), tokenizer_fingerprint(bundle), list(args.data))
-        print(f"tokens of {len(data['img'])} samples cached in {cache}", file=sys.stderr)
+    if caches:
+        save_token_cache(caches[0], data, read_metas(args.data), tokenizer_fingerprint(bundle), list(args.data))
+        print(f"tokens of {len(data['img'])} samples cached in {caches[0]}", file=sys.stderr)
     return data
 
 
-def check_views(bundle: PolicyBundle, meta: dict[str, Any], where) -> None:
-    """The data's cameras and frame offsets must be the bundle's (the views' order is the token layout)."""
+def check_views(bundle: PolicyBundle, meta: dict[str, Any], where) -> tuple[list[int], list[int]]:
+    """The data's frame offsets must be the bundle's and its cameras must include the bundle's (a dataset rendered
+    with more cameras serves a policy of some of them). Returns the indices of the bundle's views among the data's
+    ``images`` (frame-major) and among its ``future_images``."""
     offsets = [float(x) for x in meta.get("frame_offsets_s", [0.0])]
-    if list(meta["camera_names"]) != list(bundle.camera_names) or not np.allclose(offsets, bundle.frame_offsets_s):
+    cams = list(meta["camera_names"])
+    if (not set(bundle.camera_names) <= set(cams) or len(offsets) != len(bundle.frame_offsets_s)
+            or not np.allclose(offsets, bundle.frame_offsets_s)):
         raise DatasetError(f"{where}: cameras {meta['camera_names']} / frame offsets {offsets} differ from the "
                            f"checkpoint's {bundle.camera_names} / {bundle.frame_offsets_s}")
+    future = [cams.index(c) for c in bundle.camera_names]
+    return [f * len(cams) + c for f in range(len(offsets)) for c in future], future
 
 
 def build_task_batch(bundle: PolicyBundle, data: dict[str, np.ndarray], task: str, idx: np.ndarray):
@@ -121,12 +144,30 @@ def build_task_batch(bundle: PolicyBundle, data: dict[str, np.ndarray], task: st
     if task != "mm2a":
         img = img[:, : bundle.n_cameras]
     if task == "mm2a":
-        return b.fill("mm2a", data["instr"][idx], img, data["state"][idx], data["action"][idx].reshape(len(idx), -1))
+        cfg = bundle.model_cfg
+        balls = data["ball"][idx].astype(np.int64).reshape(len(idx), -1) if cfg.ball_views else None
+        return b.fill("mm2a", data["instr"][idx], img[:, : bundle.mm2a_image_views], data["state"][idx],
+                      data["action"][idx].reshape(len(idx), -1), ball_tokens=balls, aux_tokens=aux_truth(bundle, data, idx))
     if task == "t2i":
         fut = data["fut"][idx].astype(np.int64).reshape(len(idx), -1) + bundle.model.vocab.image_offset
         return b.fill("t2i", data["instr"][idx], img, None, fut)
     ans = data["answer"][idx] + bundle.model.vocab.text_offset
     return b.fill("mmu", data["quest"][idx], img, None, ans)
+
+
+def aux_truth(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray) -> np.ndarray | None:
+    """Tokens ``(B, P*3)`` of the aux target of samples ``idx``: the instructed ball at t (and at the earlier frame);
+    None for a model without one."""
+    p = bundle.model_cfg.aux_positions
+    if not p:
+        return None
+    pos = [data["target_pos_m"][idx], data["target_prev_pos_m"][idx]][:p]
+    if p > 2:
+        raise ValueError(f"aux_positions {p}: the data holds the ball at t and at the earlier frame only")
+    pos = np.stack(pos, axis=1).astype(np.float64)  # (B, P, 3)
+    if not np.all(np.isfinite(pos)):
+        raise DatasetError("the aux target needs target_prev_pos_m in the data (collected since issue 25)")
+    return bundle.aux_tokens(pos).reshape(len(idx), -1)
 
 
 def mask_targets(tokens: np.ndarray, target_idx: np.ndarray, mask_id: int, rng: np.random.Generator,
@@ -172,7 +213,10 @@ def soft_bin_cross_entropy(logits: torch.Tensor, target: torch.Tensor, sigma_bin
 
 
 def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_prob: float, device,
-              action_sigma_bins: float = 0.0, known_prefix_max: int = 0, known_prefix_prob: float = 0.0) -> torch.Tensor:
+              action_sigma_bins: float = 0.0, known_prefix_max: int = 0, known_prefix_prob: float = 0.0,
+              with_aux: bool = False, aux_known_prob: float = 0.0):
+    """The masked-token loss of ``task`` on samples ``idx``; with ``with_aux`` (mm2a) ``(loss, aux loss or None)``:
+    the aux target (the ball's 3-D positions) is masked in every query, as at run time, and scored beside the chunk."""
     model = bundle.model
     clean, lay = build_task_batch(bundle, data, task, idx)
     masked, mask = mask_targets(clean, lay.target_idx, model.vocab.mask_id, rng, full_prob if task == "mm2a" else 0.0)
@@ -183,32 +227,72 @@ def task_loss(bundle: PolicyBundle, data, task: str, idx: np.ndarray, rng, full_
         sub[mask] = model.vocab.mask_id
         masked = clean.copy()
         masked[:, lay.target_idx] = sub
+    aux_rows = np.ones(len(idx), dtype=bool)  # the rows whose aux target is masked and scored
+    if len(lay.aux_idx):  # masked, as in the query of run time; aux_known_prob: the truth given (the second pass)
+        if aux_known_prob > 0:
+            aux_rows = rng.random(len(idx)) >= aux_known_prob
+        sub = masked[:, lay.aux_idx]
+        sub[aux_rows] = model.vocab.mask_id
+        masked[:, lay.aux_idx] = sub
     lo, _ = model.vocab.range_of(lay.target_modality)
     inp = torch.as_tensor(masked, device=device)
     tgt = torch.as_tensor(clean[:, lay.target_idx] - lo, device=device)
     m = torch.as_tensor(mask, device=device)
-    logits = model.target_logits(inp, lay)
+    h = model.hidden(inp, lay)
+    logits = model.logits(h[:, torch.as_tensor(lay.target_idx, device=device)], lay.target_modality)
     if task == "mm2a" and action_sigma_bins > 0:
-        return soft_bin_cross_entropy(logits[m], tgt[m], action_sigma_bins)
-    return F.cross_entropy(logits[m].float(), tgt[m])
+        loss = soft_bin_cross_entropy(logits[m], tgt[m], action_sigma_bins)
+    else:
+        loss = F.cross_entropy(logits[m].float(), tgt[m])
+    if not with_aux:
+        return loss
+    if task != "mm2a" or not len(lay.aux_idx):
+        return loss, None
+    if not aux_rows.any():
+        return loss, None
+    aux_idx = torch.as_tensor(lay.aux_idx, device=device)
+    rows = torch.as_tensor(np.flatnonzero(aux_rows), device=device)
+    aux_logits = model.logits(h[rows][:, aux_idx], "action").reshape(-1, model.vocab.range_of("action")[1] - lo)
+    aux_tgt = torch.as_tensor(clean[aux_rows][:, lay.aux_idx] - lo, device=device).reshape(-1)
+    sigma = action_sigma_bins if action_sigma_bins > 0 else 0.0
+    aux = soft_bin_cross_entropy(aux_logits, aux_tgt, sigma) if sigma else F.cross_entropy(aux_logits.float(), aux_tgt)
+    return loss, aux
 
 
 # ---------------------------------------------------------------- evaluation
 @torch.no_grad()
 def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray, tasks=("mm2a", "t2i", "mmu"),
-             batch: int = 64, t2i_steps: int = 8, mmu_steps: int = 4) -> dict[str, float]:
-    """Held-out figures: action token accuracy and error (m), t2i token accuracy, mmu answer accuracy."""
+             batch: int = 64, t2i_steps: int = 8, mmu_steps: int = 4, aux_first: bool = False) -> dict[str, float]:
+    """Held-out figures: action token accuracy and error (m), t2i token accuracy, mmu answer accuracy; the aux
+    target's errors (m). ``aux_first``: decode the chunk given the predicted aux target (two passes)."""
     model, dev = bundle.model, bundle.device
     model.eval()
     res: dict[str, float] = {"n_eval": int(len(idx))}
-    acc = {k: [] for k in ("act_tok", "act_err", "act_final", "act_bin1", "t2i", "t2i_copy", "mmu")}
+    acc = {k: [] for k in ("act_tok", "act_err", "act_final", "act_bin1", "t2i", "t2i_copy", "mmu", "aux_t", "aux_prev",
+                           "aux_disp")}
     for s in range(0, len(idx), batch):
         j = idx[s : s + batch]
         if "mm2a" in tasks:
             clean, lay = build_task_batch(bundle, data, "mm2a", j)
             inp = clean.copy()
             inp[:, lay.target_idx] = model.vocab.mask_id
-            out = target_tokens(decode_parallel(model, torch.as_tensor(inp, device=dev), lay, 1), lay).cpu().numpy()
+            if len(lay.aux_idx):
+                inp[:, lay.aux_idx] = model.vocab.mask_id
+                aux_lo = model.vocab.range_of("action")[0]
+                h = model.hidden(torch.as_tensor(inp, device=dev), lay)
+                aux_bins = model.logits(h[:, torch.as_tensor(lay.aux_idx, device=dev)], "action").argmax(-1).cpu().numpy()
+                aux_pred = bundle.aux_positions_m(aux_bins.reshape(len(j), -1, 3))
+                aux_true = np.stack([data["target_pos_m"][j], data["target_prev_pos_m"][j]], 1)[:, : aux_pred.shape[1]]
+                err = np.linalg.norm(aux_pred - aux_true, axis=-1)
+                acc["aux_t"].append(err[:, 0])
+                if err.shape[1] > 1:
+                    acc["aux_prev"].append(err[:, 1])
+                    dv = (aux_pred[:, 0] - aux_pred[:, 1]) - (aux_true[:, 0] - aux_true[:, 1])
+                    acc["aux_disp"].append(np.linalg.norm(dv, axis=-1))
+            query = torch.as_tensor(inp, device=dev)
+            if aux_first:
+                query = fill_aux(model, query, lay)
+            out = target_tokens(decode_parallel(model, query, lay, 1), lay).cpu().numpy()
             truth = clean[:, lay.target_idx]
             acc["act_tok"].append((out == truth).ravel())
             acc["act_bin1"].append((np.abs(out - truth) <= 1).ravel())
@@ -240,7 +324,8 @@ def evaluate(bundle: PolicyBundle, data: dict[str, np.ndarray], idx: np.ndarray,
             np.linalg.norm(data["actions_f"][idx][..., :3] - mean_chunk[None, :, :3], axis=-1).mean())
     names = {"act_tok": "action_token_acc", "act_bin1": "action_token_acc_within_1bin", "act_err": "action_pos_err_m",
              "act_final": "final_waypoint_to_target_m", "t2i": "t2i_token_acc", "t2i_copy": "t2i_copy_current_baseline_acc",
-             "mmu": "mmu_answer_acc"}
+             "mmu": "mmu_answer_acc", "aux_t": "aux_ball_pos_err_m", "aux_prev": "aux_ball_prev_pos_err_m",
+             "aux_disp": "aux_ball_displacement_err_m"}
     for k, v in acc.items():
         if v:
             res[names[k]] = float(np.mean(np.concatenate(v)))
@@ -276,19 +361,24 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
     n_val = min(512, max(1, len(frames) // 20))
     val_frames, train_frames = frames[perm[:n_val]], frames[perm[n_val:]]
     init = PolicyBundle.load(args.init, "cpu", require_model=False) if args.init else None
-    if init is not None:  # fine-tune its image tokenizer; its text tokenizer (the model's text ids) stays
+    strides = tuple(int(s) for s in (args.strides or "2,2,2").split(","))
+    # --init with other --strides: a new VQ-VAE (another grid) under the checkpoint's text tokenizer and model
+    new_vq = init is not None and args.strides is not None and strides != tuple(init.image_cfg.strides)
+    if init is not None and not new_vq:  # fine-tune its image tokenizer; its text tokenizer (the model's text ids) stays
         if init.image_cfg.image_size_px != int(meta["image_size_px"]):
             raise SystemExit(f"--init {args.init}: its image tokenizer takes {init.image_cfg.image_size_px} px frames, "
                              f"the data has {meta['image_size_px']} px")
         text_tok, icfg, img_tok = init.text_tokenizer, init.image_cfg, init.image_tokenizer
     else:
-        text_tok = TextTokenizer.train(corpus, vocab_size=args.text_vocab)
-        strides = tuple(int(s) for s in args.strides.split(","))
+        text_tok = init.text_tokenizer if new_vq else TextTokenizer.train(corpus, vocab_size=args.text_vocab)
         chans = tuple([32, 64, 96, 96][: len(strides)])
-        icfg = ImageTokenizerConfig(image_size_px=int(meta["image_size_px"]), strides=strides, channels=chans,
-                                    codebook_size=args.codebook_size)
+        try:
+            icfg = ImageTokenizerConfig(image_size_px=int(meta["image_size_px"]), strides=strides, channels=chans,
+                                        codebook_size=init.image_cfg.codebook_size if new_vq else args.codebook_size)
+        except ValueError as exc:
+            raise SystemExit(f"--strides {args.strides}: {exc}") from None
         img_tok = ImageTokenizer(icfg)
-    psnr_before = evaluate_psnr(img_tok, val_frames) if init is not None else None
+    psnr_before = evaluate_psnr(img_tok, val_frames) if init is not None and not new_vq else None
     log: list = []
     stats = train_image_tokenizer(img_tok, train_frames, args.steps, args.batch_size or 32, args.lr or 1e-3,
                                   args.seed, device, not args.no_progress, log)
@@ -308,8 +398,13 @@ def run_stage0(args, meta: dict[str, Any], device: str) -> tuple[PolicyBundle, d
                "text_vocab_size": text_tok.vocab_size, "frames_train": len(train_frames), "frames_heldout": len(val_frames),
                "grid": icfg.grid}
     if init is not None and init.model is not None:  # the policy goes on with the fine-tuned codes
-        figures["image_psnr_db_heldout_before"] = psnr_before
-        bundle.attach_model(init.model_cfg, init.model)
+        if new_vq:  # the codes are new: their embedding rows restart from the new codebook, the grid is the new one
+            bundle.attach_model(replace(init.model_cfg, grid=icfg.grid), init.model)
+            init.model.init_image_embeddings(img_tok.codebook, seed=args.seed)
+            figures["new_image_tokenizer"] = f"strides {list(strides)}, grid {icfg.grid} (was {init.image_cfg.grid})"
+        else:
+            figures["image_psnr_db_heldout_before"] = psnr_before
+            bundle.attach_model(init.model_cfg, init.model)
         bundle.info = {k: init.info[k] for k in ("train_config", "history", "stage", "command", "figures") if k in init.info}
         return bundle, {"figures": figures, "n_samples": n_total, "text_size": init.model_cfg.text_size,
                         "log_tail": log[-5:], "init": str(args.init), "history": list(init.info.get("history", []))}
@@ -382,24 +477,26 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
             model = bundle.attach_model(mcfg)
             model.init_image_embeddings(bundle.image_tokenizer.codebook, seed=args.seed)
             model.init_action_embeddings()
+        set_layout(bundle, args, meta)
         w = LossWeights.for_stage(args.stage)
+        aux_w = (0.5 if bundle.model_cfg.aux_positions and args.stage == 2 else 0.0) if args.w_aux is None else args.w_aux
         w = LossWeights(action=w.action if args.w_action is None else args.w_action,
                         text=w.text if args.w_text is None else args.w_text,
-                        image=w.image if args.w_image is None else args.w_image)
+                        image=w.image if args.w_image is None else args.w_image, aux=aux_w)
         tc = TrainConfig(stage=args.stage, steps=args.steps or 2000, batch_size=args.batch_size or 32, lr=args.lr or 3e-4,
                          weight_decay=0.01 if args.weight_decay is None else args.weight_decay,
                          warmup_steps=min(200, max(1, (args.steps or 2000) // 10)), weights=w, seed=args.seed,
                          eval_samples=args.eval_samples, action_label_sigma_bins=args.action_sigma_bins,
                          aux_batch_size=args.aux_batch_size or 0, known_prefix_max_waypoints=args.known_prefix_max,
-                         known_prefix_prob=args.known_prefix_prob)
-        new_views = (list(meta["camera_names"]), [float(x) for x in meta.get("frame_offsets_s", [0.0])])
+                         known_prefix_prob=args.known_prefix_prob, aux_known_prob=args.aux_known_prob)
+        new_views = (list(args.cameras or meta["camera_names"]), [float(x) for x in meta.get("frame_offsets_s", [0.0])])
         if (list(bundle.camera_names), list(bundle.frame_offsets_s)) != new_views:
             # a checkpoint trained on other views (e.g. one camera, one frame) fine-tuned on this data: its
             # layout becomes the data's (the view embeddings of the new views start from their initial values)
             print(f"views: {bundle.camera_names} x {bundle.frame_offsets_s} -> {new_views[0]} x {new_views[1]}",
                   file=sys.stderr)
             bundle.camera_names, bundle.frame_offsets_s = new_views
-    check_data_matches(bundle, meta, args.init or resume_path)
+    check_data_matches(bundle, meta, args.init or resume_path, list(bundle.camera_names))
     if tc.known_prefix_max_waypoints >= bundle.model_cfg.horizon:
         raise SystemExit(f"--known-prefix-max {tc.known_prefix_max_waypoints} must be below the chunk horizon "
                          f"{bundle.model_cfg.horizon} (the issue's recipe: H/2)")
@@ -469,10 +566,14 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
             else:
                 idx = rng.choice(train_idx, size=bs, replace=True, p=draw_p)
             with torch.autocast(amp_device, dtype=torch.bfloat16, enabled=use_amp):
-                loss = task_loss(bundle, data, task, idx, rng, tc.full_mask_prob_action, device,
-                                 tc.action_label_sigma_bins, tc.known_prefix_max_waypoints, tc.known_prefix_prob)
+                loss, aux = task_loss(bundle, data, task, idx, rng, tc.full_mask_prob_action, device,
+                                      tc.action_label_sigma_bins, tc.known_prefix_max_waypoints, tc.known_prefix_prob,
+                                      with_aux=True, aux_known_prob=tc.aux_known_prob)
             total = total + getattr(tc.weights, TASK_WEIGHT[task]) * loss
             losses[task] = float(loss.detach())
+            if aux is not None and tc.weights.aux > 0:
+                total = total + tc.weights.aux * aux
+                losses["aux"] = float(aux.detach())
         opt.zero_grad(set_to_none=True)
         total.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), tc.grad_clip)
@@ -489,7 +590,7 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     model.eval()
     ev_idx = eval_subset(val_idx, tc.eval_samples, tc.split_seed)
     te = time.perf_counter()
-    figures = evaluate(bundle, data, ev_idx)
+    figures = evaluate(bundle, data, ev_idx, aux_first=bool(bundle.model_cfg.aux_positions) and tc.aux_known_prob > 0)
     figures["eval_wall_s"] = time.perf_counter() - te
     info = {"figures": figures, "n_samples": n, "n_train": int(len(train_idx)), "n_heldout": int(len(val_idx)),
             "final_losses_ema": {k: round(v, 4) for k, v in ema.items()}, "train_config": asdict(tc),
@@ -497,23 +598,66 @@ def run_stage12(args, meta: dict[str, Any], device: str, out: Path):
     return bundle.to("cpu"), info
 
 
-def resolve_data(args) -> dict[str, Any]:
-    """The data's meta from ``--data`` or an existing ``--tokens-cache`` (which then fills ``args.data``)."""
-    cache = args.tokens_cache
-    if cache and args.stage == 0:
-        raise SystemExit("--tokens-cache is for stages 1/2 (stage 0 trains the image tokenizer on the frames themselves)")
-    if cache and Path(cache).is_file():
+def set_layout(bundle: PolicyBundle, args, meta: dict[str, Any]) -> None:
+    """Issue 25's layout switches of a stage-1/2 run that does not resume: ball tokens, the aux target, fewer image
+    frames in mm2a, a shorter text. The model's weights are unchanged (the new segments use the state type's
+    position rows); the switches only change which tokens a query holds."""
+    cfg = bundle.model_cfg
+    n_frames = len(meta.get("frame_offsets_s", [0.0]))
+    n_cams = len(args.cameras or meta["camera_names"])
+    changes: dict[str, Any] = {}
+    if args.ball_tokens is not None:
+        changes["ball_views"] = n_cams * n_frames if args.ball_tokens else 0
+        changes["ball_colors"] = len(bundle.ball_detector.colors)
+    if args.aux_positions is not None:
+        if args.aux_positions > min(2, n_frames):
+            raise SystemExit(f"--aux-positions {args.aux_positions}: the data has the ball at t"
+                             f"{' and at the earlier frame' if n_frames > 1 else ''} only")
+        changes["aux_positions"] = args.aux_positions
+    if args.max_text_len is not None:
+        changes["max_text_len"] = args.max_text_len
+    if changes:
         try:
-            header = read_header(cache)
-        except TokenCacheError as exc:
-            raise SystemExit(f"--tokens-cache: {exc}") from None
-        if args.data and [str(Path(d)) for d in args.data] != [str(Path(d)) for d in header["data_paths"]]:
-            raise SystemExit(f"--tokens-cache {cache} holds the tokens of {header['data_paths']}, not of --data "
+            bundle.attach_model(replace(cfg, **changes), bundle.model)
+        except ValueError as exc:
+            raise SystemExit(f"layout: {exc}") from None
+    if args.mm2a_image_frames is not None:
+        if not 0 <= args.mm2a_image_frames <= n_frames:
+            raise SystemExit(f"--mm2a-image-frames must be in [0, {n_frames}], got {args.mm2a_image_frames}")
+        bundle.mm2a_image_frames = args.mm2a_image_frames
+
+
+def resolve_data(args) -> dict[str, Any]:
+    """The data's meta from ``--data`` or from existing ``--tokens-cache`` files (which then fill ``args.data``: the
+    directories of every cache, in order)."""
+    caches = _caches(args)
+    if caches and args.stage == 0:
+        raise SystemExit("--tokens-cache is for stages 1/2 (stage 0 trains the image tokenizer on the frames themselves)")
+    if caches and all(Path(c).is_file() for c in caches):
+        headers = []
+        for c in caches:
+            try:
+                headers.append(read_header(c))
+            except TokenCacheError as exc:
+                raise SystemExit(f"--tokens-cache: {exc}") from None
+        paths = [str(Path(d)) for h in headers for d in h["data_paths"]]
+        if args.data and [str(Path(d)) for d in args.data] != paths:
+            raise SystemExit(f"--tokens-cache {' '.join(caches)} holds the tokens of {paths}, not of --data "
                              f"{args.data}; leave --data out or name another cache file")
-        args.data = list(header["data_paths"])
-        return dict(header["meta"])
+        meta = dict(headers[0]["meta"])
+        for c, h in zip(caches[1:], headers[1:]):
+            for k in ("image_size_px", "chunk_horizon", "chunk_dt_s", "action_bounds", "action_bins", "frame_offsets_s"):
+                if h["meta"].get(k) != meta.get(k):
+                    raise SystemExit(f"--tokens-cache {c}: its data's {k}={h['meta'].get(k)!r} differs from "
+                                     f"{caches[0]}'s {meta.get(k)!r}")
+        meta["n_samples"] = sum(int(h["n_samples"]) for h in headers)
+        args.data = paths
+        return meta
+    if len(caches) > 1:
+        missing = [c for c in caches if not Path(c).is_file()]
+        raise SystemExit(f"--tokens-cache: {missing} do not exist (only a single cache is written from --data)")
     if not args.data:
-        raise SystemExit("--data is required (or --tokens-cache naming an existing cache, stages 1/2)")
+        raise SystemExit("--data is required (or --tokens-cache naming existing caches, stages 1/2)")
     try:
         return read_metas(args.data)
     except DatasetError as exc:
@@ -529,13 +673,16 @@ def budget_steps(step: int, done: int, elapsed_s: float, left_s: float, planned:
     return int(max(step, min(planned, fit)))
 
 
-def check_data_matches(bundle: PolicyBundle, meta: dict[str, Any], src) -> None:
+def check_data_matches(bundle: PolicyBundle, meta: dict[str, Any], src, cameras: list[str] | None = None) -> None:
     b = meta["action_bounds"]
     at = bundle.action_tokenizer
     if at.bins != int(meta["action_bins"]) or not np.allclose(at.bounds.low, b["low"]) or not np.allclose(at.bounds.high, b["high"]):
         raise CheckpointError(f"{src}: its action tokenizer (bins {at.bins}, bounds {at.bounds}) does not match the "
                               f"dataset's meta.json (bins {meta['action_bins']}, bounds {b})")
-    n_views = len(meta["camera_names"]) * len(meta.get("frame_offsets_s", [0.0]))
+    unknown = [c for c in cameras or [] if c not in meta["camera_names"]]
+    if unknown:
+        raise CheckpointError(f"{src}: cameras {unknown} are not among the data's {meta['camera_names']}")
+    n_views = len(cameras or meta["camera_names"]) * len(meta.get("frame_offsets_s", [0.0]))
     if bundle.model_cfg and n_views > bundle.model_cfg.max_views:
         raise CheckpointError(f"{src}: dataset has {n_views} views (cameras x frames) > max_views {bundle.model_cfg.max_views}")
     if bundle.model_cfg and int(meta["chunk_horizon"]) != bundle.model_cfg.horizon:
@@ -585,10 +732,12 @@ def main(argv: list[str] | None = None) -> Path:
                     help="dataset directory (meta.json + shard_XXXX.npz); several directories are trained on together "
                          "(they must agree on image size, cameras, chunk layout and action bins); may be left out "
                          "in stages 1/2 when --tokens-cache names an existing cache")
-    ap.add_argument("--tokens-cache", default=None, metavar="FILE",
+    ap.add_argument("--tokens-cache", nargs="+", default=None, metavar="FILE",
                     help="stages 1/2: the data's tokens in one file (policy.token_cache). Read when it exists (then "
                          "--data may be left out: the cache holds the dataset's meta), else written after tokenizing "
-                         "--data. It lets an accelerator machine train without the frames")
+                         "--data. It lets an accelerator machine train without the frames. Several existing caches "
+                         "of the same tokenizers train together (data that accumulates: one cache per collection); "
+                         "--data-weights then takes one weight per directory of all of them, in order")
     ap.add_argument("--time-budget-s", type=float, default=None, metavar="S",
                     help="stages 1/2: wall-clock budget of the training loop (s; the evaluation after it is extra). "
                          "After 20 steps the speed is measured and --steps is lowered to what fits, so the learning-rate "
@@ -616,6 +765,26 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--w-action", type=float, default=None)
     ap.add_argument("--w-text", type=float, default=None)
     ap.add_argument("--w-image", type=float, default=None)
+    ap.add_argument("--w-aux", type=float, default=None,
+                    help="stage 2: weight of the aux target (the instructed ball's 3-D positions) of a model with "
+                         "--aux-positions (default 0.5 when it has one)")
+    ap.add_argument("--aux-known-prob", type=float, default=0.0,
+                    help="stage 2: share of the mm2a samples whose aux target (the ball's true positions) is given, "
+                         "so the chunk learns to read it; the checkpoint then decodes in two passes (positions, then "
+                         "the chunk). Default 0: one pass, the aux target only shapes what the model computes")
+    ap.add_argument("--cameras", nargs="+", default=None, metavar="NAME",
+                    help="stages 1/2: train on these cameras of the data (in this order; default: all of the data's)")
+    ap.add_argument("--ball-tokens", type=int, choices=(0, 1), default=None,
+                    help="stages 1/2 (not on --resume): 1 = every view's ball positions enter the mm2a query as tokens "
+                         "(policy.ball_detector on the frames), 0 = none (default: the --init checkpoint's layout)")
+    ap.add_argument("--aux-positions", type=int, choices=(0, 1, 2), default=None,
+                    help="stages 1/2: predict the instructed ball's 3-D position at t (1) and at the earlier frame (2) "
+                         "as an auxiliary mm2a target; 0 = none (default: the --init checkpoint's)")
+    ap.add_argument("--mm2a-image-frames", type=int, default=None, metavar="K",
+                    help="stages 1/2: the VQ codes of the first K frames enter the mm2a query (1 = the current frame; "
+                         "the earlier one is then seen through its ball tokens only); 0 = all (default: --init's)")
+    ap.add_argument("--max-text-len", type=int, default=None,
+                    help="stages 1/2: text tokens of an instruction / question (default: --init's, 24)")
     ap.add_argument("--action-sigma-bins", type=float, default=16.0,
                     help="std (bins) of the Gaussian soft action targets (HL-Gauss); 0 = plain one-hot cross-entropy")
     ap.add_argument("--known-prefix-max", type=int, default=0, metavar="W",
@@ -632,7 +801,10 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--d-model", type=int, default=192)
     ap.add_argument("--layers", type=int, default=4)
     ap.add_argument("--heads", type=int, default=6)
-    ap.add_argument("--strides", default="2,2,2", help="stage 0: image encoder strides (2,2,2 -> 12x12 codes at 96 px)")
+    ap.add_argument("--strides", default=None,
+                    help="stage 0: image encoder strides (default 2,2,2 -> 12x12 codes at 96 px; 2,2,3 -> 8x8). With "
+                         "--init: other strides than the checkpoint's train a new VQ-VAE under its text tokenizer and "
+                         "model (the image-code embeddings restart from the new codebook); the same or none fine-tune its own")
     ap.add_argument("--codebook-size", type=int, default=512)
     ap.add_argument("--text-vocab", type=int, default=512, help="stage 0: BPE vocabulary size (at most; the text range "
                     "of the shared vocabulary is the trained size)")

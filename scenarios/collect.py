@@ -10,8 +10,8 @@ action chunk for that frame (float, not quantized), the frame ``--future-dt-s`` 
 
 Output: a directory with ``meta.json`` and shards ``shard_XXXX.npz`` (arrays ``images (N,V,H,W,3)
 uint8``, ``future_images``, ``q_rad (N,7)``, ``actions (N,16,7)``, ``instructions``, ``questions``,
-``answers`` (unicode strings), ``target_index (N,)``, ``target_pos_m (N,3)``), which numpy or any
-npz reader opens.
+``answers`` (unicode strings), ``target_index (N,)``, ``target_pos_m (N,3)``, ``target_prev_pos_m (N,3)``: the
+instructed ball where the earlier frame was taken), which numpy or any npz reader opens.
 
 Seeing in 3-D and seeing motion (issue 14): ``--plane-z-m 0`` puts the balls anywhere in the workspace box,
 ``--cameras front side`` renders two views (so a ball's depth and height are both in the frames), ``--frame-gap-s 0.1``
@@ -199,7 +199,8 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
     frames: dict[int, np.ndarray] = {}
     target_at: dict[int, np.ndarray] = {}  # the instructed ball where an earlier frame was taken
     samples: dict[str, list] = {k: [] for k in ("images", "future_images", "q_rad", "actions", "instructions",
-                                                "questions", "answers", "target_index", "target_pos_m")}
+                                                "questions", "answers", "target_index", "target_pos_m",
+                                                "target_prev_pos_m")}
     pending = []
     for k in range(n + 1):
         t = k * dt
@@ -238,6 +239,9 @@ def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[s
         samples["answers"].append(a)
         samples["target_index"].append(world.target_index)
         samples["target_pos_m"].append(obs.target_pos_m.astype(np.float32))
+        # where the ball was in the earlier frame (the first sample repeats the current frame: its position)
+        prev = obs.target_prev_pos_m if obs.target_prev_pos_m is not None else obs.target_pos_m
+        samples["target_prev_pos_m"].append(np.asarray(prev).astype(np.float32))
     return samples
 
 

@@ -12,7 +12,8 @@
 - a site ``tcp`` on ``panda_link7`` at the pose of Pinocchio's ``panda_hand_tcp`` frame;
 - a table whose top is the plane z = 0 (robot base on it), a floor, lights;
 - mocap target spheres ``target0`` (red) and, with ``n_objects=2``, ``target1`` (blue), no collision;
-- fixed cameras ``front``, ``top``, ``side`` aimed at the workspace.
+- fixed cameras ``front``, ``top``, ``side`` aimed at the workspace, and ``box_front``, ``box_side`` that frame
+  exactly the box the balls move in (a few millimetres per pixel at 96 px).
 
 Collision bits: robot geoms have contype=1/conaffinity=2, environment geoms contype=2/conaffinity=1,
 so the robot collides with the table and floor but not with itself; targets have 0/0.
@@ -53,7 +54,7 @@ GRIPPER_TENDON = "gripper_opening"
 #: largest gripper opening (both fingers at their 0.04 m limit), m.
 GRIPPER_MAX_M = 0.08
 #: cameras the scene provides.
-AVAILABLE_CAMERAS: tuple[str, ...] = ("front", "top", "side")
+AVAILABLE_CAMERAS: tuple[str, ...] = ("front", "top", "side", "box_front", "box_side")
 #: target body names and colours, by object index.
 TARGET_BODIES: tuple[str, ...] = ("target0", "target1")
 TARGET_COLORS: tuple[str, ...] = ("red", "blue")
@@ -73,7 +74,15 @@ _CAMERAS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]
     "top": ((0.5, 0.0, 1.6), (0.5, 0.0, 0.0), 45.0),
     # on the robot's right (-y), level with the workspace
     "side": ((0.45, -1.45, 0.45), (0.45, 0.0, 0.3), 45.0),
+    # framing the box the balls move in (``scenarios.targets.TargetSpec`` workspace, 0.35-0.65 x -0.3-0.3 x
+    # 0.15-0.45 m): every ball of the box lies whole inside the 96 px frame with >= 3 px to spare, and no wider.
+    # From +x, 25 deg above the box centre, 2.5 m away: y across the image, z (and some x) up; 7.3-8.5 mm/px.
+    "box_front": ((2.7658, 0.0, 1.3565), (0.5, 0.0, 0.3), 17.2),
+    # From -y, level with the box centre, 1.8 m away: x across, z up; 3.9-5.5 mm/px (near-far face).
+    "box_side": ((0.5, -1.8, 0.3), (0.5, 0.0, 0.3), 14.2),
 }
+#: the cameras that frame the workspace box (the 3-D policy's views since issue 25)
+BOX_CAMERAS: tuple[str, ...] = ("box_front", "box_side")
 
 
 @dataclass(frozen=True)
