@@ -62,7 +62,7 @@ from controllers.rotations import rot_from_rotvec, rotvec_from_rot
 from mmact_ctrl.chunk import Observation
 
 #: the cameras of the simulated scene (``scenarios.world.panda_scene.AVAILABLE_CAMERAS``; a test holds them equal)
-SCENE_CAMERAS: tuple[str, ...] = ("front", "top", "side")
+SCENE_CAMERAS: tuple[str, ...] = ("front", "top", "side", "box_front", "box_side")
 #: the gripper's full opening, m
 GRIPPER_MAX_M = 0.08
 #: the state parts a mapping can put in a state key, and their sizes
