@@ -4,6 +4,7 @@ residual) -> (Ruckig) -> (MPC) -> QP -> torques."""
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -76,7 +77,8 @@ class HybridController:
         self.mpc = (TaskSpaceMPC(replace(config.mpc, max_solve_ms=math.inf), q_nominal_rad=self.model.home_q_rad)
                     if self.use_mpc else None)
         self.mpc_worker = InlineMPC(self.mpc) if self.mpc is not None else None
-        self.offpath_us = 0.0  # time this tick spent on work that runs beside the 1 kHz path on a robot (the MPC)
+        self.offpath_us = 0.0  # this tick's time on work real time does beside the command path (MPC update + solve), us
+        self.after_us = 0.0  # the part of it real time does on the loop's thread after the command (the update), us
         self.recorded_plans: list | None = None
         self._deferred_mpc: tuple | None = None  # a recording's list of (asked s, t0 s, dt s, TCP preview (N, 3))
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
@@ -99,6 +101,11 @@ class HybridController:
         self.mpc_bypass_ticks = 0  # ticks tracking the smoothed reference directly: no good MPC plan covered them
         self._good_plan_end_s = 0.0
         self.executor.bind(self)
+        # the QP's rare paths (DAQP's rescue, the fallback) run once now, not for the first time inside an episode
+        zeros7 = np.zeros(7)
+        home = self.model.terms(self.q_post, zeros7)
+        self.qp.warm_up(home, self.q_post, zeros7, TaskReference(np.array(home.pos_m), np.zeros(3), np.zeros(3),
+                                                                 np.array(home.rot), np.zeros(3), np.zeros(3), self.q_post))
 
     @property
     def mode(self) -> str:
@@ -329,19 +336,22 @@ class HybridController:
         terms = self.model.terms(q_rad, dq_rad_s)
         self.terms = terms
         self.offpath_us = 0.0
+        self.after_us = 0.0
         if self.use_mpc:
             worker = self.mpc_worker
             if t_s >= self._next_mpc_s - 1e-9:
-                ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
-                self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
-                problem = self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot)
-                n_solved = len(worker.solve_us)
-                if getattr(worker, "defer_submit", False):  # sent after the tick (end_tick): it solves while we sleep
-                    self._deferred_mpc = (t_s, problem)
-                else:
-                    worker.submit(t_s, problem)
-                if isinstance(worker, InlineMPC) and len(worker.solve_us) > n_solved:
-                    self.offpath_us = worker.solve_us[-1]  # beside the 1 kHz path on a robot: not the tick's time
+                if getattr(worker, "defer_submit", False):
+                    # real time: the MPC's whole 50 Hz work (Ruckig at the MPC rate, the preview, the problem) is
+                    # done once the tick's command is out (end_tick), not before it; this tick tracks the plan it has
+                    self._deferred_mpc = (t_s, np.array(q_rad), np.array(dq_rad_s), terms)
+                else:  # simulated time: at once, so the plan of this tick's state drives this tick (results kept)
+                    a0, n_solved = time.perf_counter(), len(worker.solve_us)
+                    self._mpc_update(t_s, q_rad, dq_rad_s, terms)
+                    # what real time does after the command (the update) and in another process (the solve) is
+                    # kept out of the command path's time (offpath_us); the update alone is after_us
+                    self.offpath_us = (time.perf_counter() - a0) * 1e6
+                    solve_us = worker.solve_us[-1] if len(worker.solve_us) > n_solved else 0.0
+                    self.after_us = max(self.offpath_us - solve_us, 0.0)
                 self._next_mpc_s = t_s + self._mpc_period_s
             done = worker.poll()
             if done is not None:  # the newest finished plan takes over
@@ -408,13 +418,24 @@ class HybridController:
         return TickOutput(tau_nm=self.qp.tau_last, gripper_m=out.gripper_m, ref_pos_m=out.ref_pos_m,
                           ee_pos_m=out.ee_pos_m, ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=out.tcp_vel_m_s)
 
-    def end_tick(self) -> None:
-        """After the tick's command is sent: hand over a deferred MPC problem (a worker that solves beside the loop
-        then solves while the loop waits for its next tick, not while it computes this one's command)."""
-        if self._deferred_mpc is not None:
-            t_s, problem = self._deferred_mpc
-            self._deferred_mpc = None
-            self.mpc_worker.submit(t_s, problem)
+    def _mpc_update(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray, terms: RobotTerms) -> None:
+        """The MPC's work at its rate: the retargeted, Ruckig-smoothed reference at ``t_s`` (kept for the ticks
+        until the next update), the problem previewed from the state of ``t_s``, handed to the worker."""
+        ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
+        self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
+        self.mpc_worker.submit(t_s, self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot))
+
+    def end_tick(self) -> float:
+        """After the tick's command is sent: the MPC update a deferring worker (real time) asked for at this tick
+        (the reference, the problem, and its hand-over: the process then solves while the loop waits for its next
+        tick, not while it computes this one's command). Returns the time it took, us (0 when there was none)."""
+        if self._deferred_mpc is None:
+            return 0.0
+        a0 = time.perf_counter()
+        t_s, q_rad, dq_rad_s, terms = self._deferred_mpc
+        self._deferred_mpc = None
+        self._mpc_update(t_s, q_rad, dq_rad_s, terms)
+        return (time.perf_counter() - a0) * 1e6
 
     def missed_tick(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:
         """A control tick whose command never reached the robot: the robot re-applies the last torque it received.

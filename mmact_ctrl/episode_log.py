@@ -21,7 +21,10 @@ class EpisodeLog:
     changed course (``World.target_change_times_s``); ``delay_steps``: per activated chunk, the waypoints of the
     running chunk consumed while it was computed (activation time minus observation time, in chunk steps: the
     inference delay d of RTC, as it actually ran); ``mpc_solve_us``: the wall time of each MPC solve, us (beside the
-    1 kHz path: not in ``tick_us``). Real time: ``late_commands`` commands computed after their cycle's deadline (they
+    1 kHz path: not in ``tick_us``). ``tick_us``: per tick, the command path (state -> checked command) as real time
+    runs it; ``after_us``: per tick, the work real time does on the loop's thread after the command is out (fusing
+    the measurements that arrived, the MPC's 50 Hz update: reference, preview, problem); simulated time does the same
+    work before the command (results unchanged) and records it here too. Real time: ``late_commands`` commands computed after their cycle's deadline (they
     count in ``missed_ticks`` too: the robot re-applied the last torque), ``deadline`` the pacer's statistics
     (``mmact_ctrl.realtime.pacer``) with its per-tick ``rt_exec_us`` / ``rt_jitter_us`` / ``rt_late_ticks``,
     ``recording`` (when the runner records: the target
@@ -38,6 +41,7 @@ class EpisodeLog:
     tau_cmd_nm: np.ndarray
     tick_us: np.ndarray
     safety_mask: np.ndarray | None = None
+    after_us: np.ndarray | None = None
     chunk_active_s: list[float] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     jump_times_s: tuple[float, ...] = ()
@@ -82,7 +86,7 @@ class EpisodeLog:
     def truncate(self, n: int) -> None:
         """Keep the first ``n`` samples (an aborted episode)."""
         for name in ("t_s", "ee_pos_m", "target_pos_m", "ref_pos_m", "q_rad", "dq_rad_s", "tau_cmd_nm", "tick_us",
-                     "safety_mask", "objects_pos_m"):
+                     "after_us", "safety_mask", "objects_pos_m"):
             value = getattr(self, name)
             if value is not None:
                 setattr(self, name, value[:n])

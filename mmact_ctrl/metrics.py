@@ -25,8 +25,10 @@
   corrections of the last guard), ``qp_rescues`` (ticks OSQP did not solve and DAQP did), ``plan_resyncs``, ``floor_clamps`` (reference samples raised to the TCP floor above the table), ``mpc_bypass_ticks`` (ticks with
   no good MPC plan, tracking the smoothed reference directly).
 - wrong_object: the TCP held within the success radius of an object that was not instructed.
-- tick_us: the wall time of the 1 kHz path per tick (perception, chunk admission, the controller, the safety check),
-  us; the MPC is solved beside it (``mmact_ctrl.mpc_worker``) and its solves are ``mpc_solve_us`` (median, p99).
+- tick_us: the wall time of the 1 kHz command path per tick as real time runs it (chunk admission, the controller,
+  the safety check), us; the MPC is solved beside it (``mmact_ctrl.mpc_worker``) and its solves are ``mpc_solve_us``
+  (median, p99); ``tick_after_us``: the command path plus the work real time does after the command on the same
+  thread (fusing the measurements, the MPC's 50 Hz update), per tick (median, p99).
 - policy_latency_ms: measured time of each chunk-source call (``plan``), ms.
 - round_trip_ms: the same calls as median / p95 / max (for a source in another process, the chunk's round trip on the
   wire); server_infer_ms / policy_infer_ms: what a remote source's server reported of its own inference time, ms
@@ -250,7 +252,7 @@ def _nanmean(values: list[float]) -> float:
 
 
 def _median_p99(values: list[float]) -> dict:
-    if not values:
+    if len(values) == 0:
         return {"median": float("nan"), "p99": float("nan")}
     return {"median": float(np.median(values)), "p99": float(np.percentile(values, 99))}
 
@@ -267,8 +269,9 @@ def _source_timing(episodes: list[dict]) -> dict:
     return {k: _median_p95_max([x for e in episodes for x in e.get("source_timing_ms", {}).get(k, [])]) for k in keys}
 
 
-def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
-    """Summary over episodes; ``tick_us`` pools the controller tick times of all episodes."""
+def summarize(episodes: list[dict], tick_us: np.ndarray, after_us: np.ndarray | None = None) -> dict:
+    """Summary over episodes; ``tick_us`` pools the controller tick times of all episodes, ``after_us`` (optional,
+    the same ticks) the work after each command (``EpisodeLog.after_us``)."""
     if not episodes:
         raise ValueError("summarize needs at least one episode")
     n_jumps = sum(e["n_jumps"] for e in episodes)
@@ -294,6 +297,8 @@ def summarize(episodes: list[dict], tick_us: np.ndarray) -> dict:
         "clipped_actions": int(sum(e["clipped_actions"] for e in episodes)),
         "tick_us": {"median": float(np.median(tick_us)), "p99": float(np.percentile(tick_us, 99))},
         "tick_us_max": float(np.max(tick_us)),
+        **({"tick_after_us": _median_p99(np.asarray(tick_us) + np.asarray(after_us))}
+           if after_us is not None and len(after_us) == len(tick_us) else {}),
         "mpc_solve_us": _median_p99([x for e in episodes for x in e.get("mpc_solve_us", [])]),
         "policy_latency_ms": _median_p99([x for e in episodes for x in e.get("plan_ms", [])]),
         "round_trip_ms": _median_p95_max([x for e in episodes for x in e.get("plan_ms", [])]),

@@ -31,6 +31,7 @@ TABLE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("MPC failures/late", "mpc_failures", "{:d}"),
     ("tick median [us]", "tick_us.median", "{:.0f}"),
     ("tick p99 [us]", "tick_us.p99", "{:.0f}"),
+    ("  with after-command work p99 [us]", "tick_after_us.p99", "{:.0f}"),
     ("MPC solve median / p99 [us]", ("mpc_solve_us.median", "mpc_solve_us.p99"), "{:.0f} / {:.0f}"),
     ("real-time factor", "realtime_factor", "{:.1f}x"),
     ("chunk source [ms]", "policy_latency_ms.median", "{:.1f}"),

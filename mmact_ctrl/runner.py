@@ -91,11 +91,16 @@ class EpisodeRunner:
             on. An agent that answers from outside (the Gymnasium environment) sets the answer in between.
         async_queries: real time: a :class:`~mmact_ctrl.realtime.async_source.AsyncQueries` that asks the source in
             a worker while the ticks go on (one query in flight; the observation's frames are rendered there from a
-            snapshot of the world, ``world.snapshot()``); each chunk is accepted on the tick it arrives, active at
-            once: its latency is what it took.
+            snapshot of the world, ``world.snapshot()``); each chunk is accepted on the tick it arrives and shapes
+            the commands from the next one: its latency is what it took.
         deadline: real time: an object whose ``missed(k)`` says, once tick ``k``'s command is computed, whether it
             is ready too late for its cycle; such a command never reaches the robot (it re-applies the last torque:
-            counted in ``missed_ticks`` and ``late_commands``, and 20 in a row abort as on the robot).
+            counted in ``missed_ticks`` and ``late_commands``, and 20 in a row abort as on the robot). With a
+            deadline, only what the command needs runs before it (the state, the controller's tick, the safety
+            check); the rest of the tick's work runs once it is out (:meth:`_after_command`: fusing the measurements
+            that arrived, admitting the chunks due by the next tick, the MPC's update). Simulated time keeps the old
+            order (its results are unchanged) and records the same work apart (``EpisodeLog.after_us``), so
+            ``tick_us`` is the command path as real time runs it in both.
         record: also keep what a recording shows (``EpisodeLog.recording``: the target estimate at 100 Hz, each
             activated chunk's waypoints, each MPC plan's TCP preview, the frames each query was answered from).
 
@@ -139,6 +144,7 @@ class EpisodeRunner:
             dq_rad_s=np.empty((n, 7)),
             tau_cmd_nm=np.empty((n, 7)),
             tick_us=np.empty(n),
+            after_us=np.zeros(n),
             safety_mask=np.zeros(n, dtype=np.uint16),
             instruction=world.instruction,
         )
@@ -172,7 +178,8 @@ class EpisodeRunner:
         self.pending_query: Observation | None = None
         self._resume = False  # the tick k stopped at its query: resume there
         self._state = None
-        self._perception_us = 0.0
+        self._after_us = 0.0  # this tick's work that real time does after the command (fusion, the MPC update), us
+        self._deferred_measurements: list = []  # real time: arrived this tick, fused once the command is out
         self._wall_s = 0.0
         self._finished: EpisodeLog | None = None
         self.record = bool(record)
@@ -218,7 +225,6 @@ class EpisodeRunner:
         """The first part of tick ``k``: measurements, and the query when one is due; True when it pauses there."""
         k, log, t = self.k, self.log, self.k * self.dt_s
         self._state = self.world.state()
-        # fuse what has arrived before planning, so a chunk observed now records the estimate of now
         s0 = time.perf_counter()
         try:
             arrived = self.sensor.poll(t)
@@ -228,15 +234,20 @@ class EpisodeRunner:
             log.events.append((t, "perception_error", f"{type(exc).__name__}: {exc}"[:200]))
         tick0 = time.perf_counter()
         log.sensor_wall_s += tick0 - s0
-        for m in arrived:
-            self.controller.perceive(m.t_capture_s, m.pos_m)
-            log.measurements += 1
-            log.measurements_lost += m.pos_m is None
-        self._perception_us = (time.perf_counter() - tick0) * 1e6 if arrived else 0.0
+        self._after_us = 0.0
+        if arrived:
+            if self.deadline is None:
+                # simulated time fuses here, before the command (results as they always were); real time fuses after
+                # the command (:meth:`_after_command`), so this time is kept off the command path's and recorded apart
+                self._fuse(arrived)
+                self._after_us = (time.perf_counter() - tick0) * 1e6
+            else:
+                self._deferred_measurements = arrived
         if self.async_queries is not None:
             self._collect(t)
         self.earlier.tick(t, self.next_plan_s, self.replan_period_s)
-        if t >= self.next_plan_s - self._eps:
+        query_due = t >= self.next_plan_s - self._eps
+        if query_due:
             if self.async_queries is not None:
                 self._ask(k, t)
                 return False
@@ -247,6 +258,45 @@ class EpisodeRunner:
                 return True
             self._query(obs)
         return False
+
+    def _fuse(self, arrived: list) -> None:
+        """Fuse the measurements that have arrived into the controller's target estimate."""
+        log = self.log
+        for m in arrived:
+            self.controller.perceive(m.t_capture_s, m.pos_m)
+            log.measurements += 1
+            log.measurements_lost += m.pos_m is None
+
+    def _after_command(self, t: float) -> float:
+        """Real time, once the command of the tick at ``t`` is out: fuse what arrived at this tick, admit the chunks
+        due by the next tick (active from it: the command they first shape is the next one), then the controller's
+        MPC update (its reference and problem, handed to the MPC process). Returns the time it took, us (simulated
+        time does the first two before the command: 0 here)."""
+        if self.deadline is None:
+            return self.controller.end_tick()
+        a0 = time.perf_counter()
+        if self._deferred_measurements:
+            arrived, self._deferred_measurements = self._deferred_measurements, []
+            self._fuse(arrived)
+        self._admit_due(t + self.dt_s)
+        return (time.perf_counter() - a0) * 1e6 + self.controller.end_tick()
+
+    def _admit_due(self, t: float) -> None:
+        """Admit the chunks due by ``t`` (the splice check against the reference at ``t``) and activate them at
+        ``t``."""
+        log, controller, executor = self.log, self.controller, self.executor
+        for entry in self.intake.due(t + self._eps):
+            gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m, entry.ee_at_obs_m)
+            if self.intake.admit(entry, t, controller.active, gap_m=gap_m):
+                controller.activate(entry.chunk, t, entry.target_at_obs_m)
+                log.chunk_active_s.append(t)
+                if self.record:
+                    log.recording["chunks"].append((t, entry.chunk.times_s.copy(), entry.chunk.waypoints.copy()))
+                log.delay_steps.append((t - entry.chunk.t0_s) / entry.chunk.dt_s)
+                self.last_arrival_s = t
+                self.next_plan_s = executor.after_activation(t, controller.active, self.next_plan_s)
+            else:
+                self.next_plan_s = executor.after_refusal(t, self.next_plan_s)
 
     def _observe(self, k: int, t: float) -> Observation:
         log, gap = self.log, self._gap_ticks
@@ -332,18 +382,12 @@ class EpisodeRunner:
         t = k * self.dt_s
         state = self._state
         tick0 = time.perf_counter()
-        for entry in self.intake.due(t + self._eps):
-            gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m, entry.ee_at_obs_m)
-            if self.intake.admit(entry, t, controller.active, gap_m=gap_m):
-                controller.activate(entry.chunk, t, entry.target_at_obs_m)
-                log.chunk_active_s.append(t)
-                if self.record:
-                    log.recording["chunks"].append((t, entry.chunk.times_s.copy(), entry.chunk.waypoints.copy()))
-                log.delay_steps.append((t - entry.chunk.t0_s) / entry.chunk.dt_s)
-                self.last_arrival_s = t
-                self.next_plan_s = executor.after_activation(t, controller.active, self.next_plan_s)
-            else:
-                self.next_plan_s = executor.after_refusal(t, self.next_plan_s)
+        if self.deadline is None:  # simulated time admits at the tick; real time once the command is out
+            a0 = time.perf_counter()
+            self._admit_due(t)
+            admit_us = (time.perf_counter() - a0) * 1e6
+            tick0 += admit_us * 1e-6  # kept off the command path's time as real time runs it, recorded in after_us
+            self._after_us += admit_us
         if controller.stop is None and (not controller.covered(t) or t - self.last_arrival_s > cfg.chunk_timeout_s):
             controller.watchdog(t)
             log.events.append((t, "watchdog_stop", ""))
@@ -365,7 +409,10 @@ class EpisodeRunner:
         tau = out.tau_nm if not mask & NONFINITE else controller.qp.tau_last  # never send a non-finite torque
         log.safety_mask[k] = mask
         # the 1 kHz path's time: what runs beside it on a robot (an inline MPC solve) is recorded apart
-        log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 + self._perception_us - controller.offpath_us
+        # the command path (state -> checked command) as real time runs it: the MPC update and the fusion, which real
+        # time does after the command, are recorded in after_us (the MPC solve, in its own process, in mpc_solve_us)
+        log.tick_us[k] = (time.perf_counter() - tick0) * 1e6 - controller.offpath_us
+        self._after_us += controller.after_us
         log.ee_pos_m[k] = state.ee_pos_m
         log.target_pos_m[k] = self.world.target_pos_m()
         if log.objects_pos_m is not None:
@@ -387,7 +434,7 @@ class EpisodeRunner:
         if self._frame_every and k % self._frame_every == 0:
             log.frames.append(self._render_video() if self._render_video else self.world.render()[0])
         self.world.step(tau, out.gripper_m)
-        controller.end_tick()
+        log.after_us[k] = self._after_us + self._after_command(t)
         if self.progress is not None and k % 500 == 0:
             self.progress(k / self.n_ticks)
 

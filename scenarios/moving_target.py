@@ -391,7 +391,7 @@ def run(args: argparse.Namespace) -> dict:
         stack.callback(bar.close)
         for mode, cfg in configs.items():
             controller = HybridController(cfg)
-            episodes, ticks = [], []
+            episodes, ticks, afters = [], [], []
             with contextlib.ExitStack() as mode_stack:
                 episode = _episode_runner(args, world, source, controller, sensor, mode_stack)
                 for i in range(args.episodes):
@@ -400,11 +400,12 @@ def run(args: argparse.Namespace) -> dict:
                     m["mode"] = mode
                     episodes.append(m)
                     ticks.append(log.tick_us)
+                    afters.append(log.after_us)
                     if i == 0:
                         first_logs[mode] = log
                     bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
                     bar.update(1)
-            summary = summarize(episodes, np.concatenate(ticks))
+            summary = summarize(episodes, np.concatenate(ticks), np.concatenate(afters))
             for e in episodes:  # per-tick lists: pooled into the summary, too long for the JSON (medians stay)
                 for key in PER_TICK_KEYS:
                     e.pop(key, None)
