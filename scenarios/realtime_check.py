@@ -96,6 +96,11 @@ def compare(real: dict, sim: dict) -> list[dict]:
     return rows
 
 
+def _rate(value) -> str:
+    """A success rate in three decimals ('-' when there is none)."""
+    return "-" if value is None or value != value else f"{float(value):.3f}"
+
+
 def _verdict(r: dict) -> str:
     if r["p_mcnemar"] < 0.05 and r["diff_success"] < 0:
         return "**simulated is optimistic** (success)"
@@ -131,7 +136,7 @@ def report(results: dict, args) -> str:
                 f"[{r['diff_final_lo_mm']:+.1f}, {r['diff_final_hi_mm']:+.1f}] ({r['p_wilcoxon']:.2f}) | "
                 f"{rt.get('median', float('nan')):.1f} / {rt.get('p95', float('nan')):.1f} / {rt.get('max', float('nan')):.1f} | "
                 f"{d.get('median', float('nan')):.2f} / {d.get('max', float('nan')):.2f} | "
-                f"{r['overruns']} ({100 * (r['overrun_rate'] or 0):.2f} %) | {r['control_command_success_rate']} | "
+                f"{r['overruns']} ({100 * (r['overrun_rate'] or 0):.2f} %) | {_rate(r['control_command_success_rate'])} | "
                 f"{r['violations']} / {r['sim_violations']} | {_verdict(r)} |")
         lines.append("")
     optimistic = [(t, r["mode"]) for t, res in results.items() for r in res["rows"] if "optimistic" in _verdict(r)]
