@@ -256,6 +256,8 @@ class TaskSpaceQP:
         self.solve(terms, q_rad, dq_rad_s, ref)
         self._rescue(terms, q_rad, dq_rad_s)
         self.fallback(terms, q_rad, dq_rad_s)
+        self._accel_jerk_box()  # what only DAQP's levels 2 and 3 compute
+        self._bounds(q_rad, dq_rad_s, self._j_eff(terms))
         self._setup_solver()
         self.tau_last, self.last_ddq = tau_was, ddq_was
         self.failures = self.solves = self.inaccurate = self.rate_clamps = self.rescues = 0
@@ -361,14 +363,18 @@ class TaskSpaceQP:
 
         The torque rows, the robot's necessary condition, hold at every level. Returns ddq or None."""
         n = self.n
-        candidates = [(self._A_dense, upper, lower, self._sense)]
-        box_lo, box_hi = self._accel_jerk_box()
-        v_lo, v_hi = self._bounds(q_rad, dq_rad_s, self._j_eff(terms))
-        A3 = np.vstack([terms.M, np.eye(n), np.eye(n)])
-        up3 = np.concatenate([upper[:n], box_hi, v_hi])
-        lo3 = np.concatenate([lower[:n], box_lo, v_lo])
-        candidates += [(A3, up3, lo3, self._sense_viability_soft), (A3, up3, lo3, self._sense_all_soft)]
-        for A, up, lo, sense in candidates:
+
+        def candidates():  # levels 2 and 3 are built only when level 1 has no solution (a rescue is on the 1 kHz path)
+            yield self._A_dense, upper, lower, self._sense
+            box_lo, box_hi = self._accel_jerk_box()
+            v_lo, v_hi = self._bounds(q_rad, dq_rad_s, self._j_eff(terms))
+            A3 = np.vstack([terms.M, np.eye(n), np.eye(n)])
+            up3 = np.concatenate([upper[:n], box_hi, v_hi])
+            lo3 = np.concatenate([lower[:n], box_lo, v_lo])
+            yield A3, up3, lo3, self._sense_viability_soft
+            yield A3, up3, lo3, self._sense_all_soft
+
+        for A, up, lo, sense in candidates():
             try:
                 x, _, flag, _ = daqp.solve(P, g, A, up, lo, sense)
             except Exception:  # noqa: BLE001 - a solver error means: no solution

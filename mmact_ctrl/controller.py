@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -79,8 +79,9 @@ class HybridController:
         self.mpc_worker = InlineMPC(self.mpc) if self.mpc is not None else None
         self.offpath_us = 0.0  # this tick's time on work real time does beside the command path (MPC update + solve), us
         self.after_us = 0.0  # the part of it real time does on the loop's thread after the command (the update), us
-        self.recorded_plans: list | None = None
-        self._deferred_mpc: tuple | None = None  # a recording's list of (asked s, t0 s, dt s, TCP preview (N, 3))
+        self.recorded_plans: list | None = None  # a recording's list of (asked s, t0 s, dt s, TCP preview (N, 3))
+        # real time: the MPC update asked for at a tick, done after the commands in two stages (:meth:`end_tick`)
+        self._deferred_mpc: list | None = None
         self._mpc_period_s = 1.0 / config.mpc.rate_hz
         self._mpc_taus = config.mpc.dt_s * np.arange(1, config.mpc.horizon_steps + 1)
         self._plan: MPCPlan | None = None
@@ -136,6 +137,7 @@ class HybridController:
         self._good_plan_end_s = 0.0
         self._plan = None
         self._prev_plan = None
+        self._deferred_mpc = None
         self._next_mpc_s = self.config.mpc_phase_s
         # before the first MPC tick (a phase > 0) the QP holds the start pose, as it does without a plan
         self._slow_ref = (0.0, pos, np.zeros(3), np.zeros(3), rot, np.zeros(3), np.zeros(3), GRIPPER_OPEN_M)
@@ -343,7 +345,8 @@ class HybridController:
                 if getattr(worker, "defer_submit", False):
                     # real time: the MPC's whole 50 Hz work (Ruckig at the MPC rate, the preview, the problem) is
                     # done once the tick's command is out (end_tick), not before it; this tick tracks the plan it has
-                    self._deferred_mpc = (t_s, np.array(q_rad), np.array(dq_rad_s), terms)
+                    self._deferred_mpc = [0, t_s, np.array(q_rad), np.array(dq_rad_s),
+                                          RobotTerms(*(np.array(getattr(terms, f.name)) for f in fields(terms))), None]
                 else:  # simulated time: at once, so the plan of this tick's state drives this tick (results kept)
                     a0, n_solved = time.perf_counter(), len(worker.solve_us)
                     self._mpc_update(t_s, q_rad, dq_rad_s, terms)
@@ -421,20 +424,32 @@ class HybridController:
     def _mpc_update(self, t_s: float, q_rad: np.ndarray, dq_rad_s: np.ndarray, terms: RobotTerms) -> None:
         """The MPC's work at its rate: the retargeted, Ruckig-smoothed reference at ``t_s`` (kept for the ticks
         until the next update), the problem previewed from the state of ``t_s``, handed to the worker."""
-        ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
-        self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
+        rot = self._mpc_reference(t_s)
         self.mpc_worker.submit(t_s, self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot))
 
-    def end_tick(self) -> float:
-        """After the tick's command is sent: the MPC update a deferring worker (real time) asked for at this tick
-        (the reference, the problem, and its hand-over: the process then solves while the loop waits for its next
-        tick, not while it computes this one's command). Returns the time it took, us (0 when there was none)."""
-        if self._deferred_mpc is None:
+    def _mpc_reference(self, t_s: float) -> np.ndarray:
+        """The first half of the MPC's update: the reference at ``t_s`` (kept in ``_slow_ref``); returns its
+        rotation."""
+        ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper = self._smoothed_reference(t_s)
+        self._slow_ref = (t_s, ref_pos, ref_vel, ref_acc, rot, ang_vel, ang_acc, gripper)
+        return rot
+
+    def end_tick(self, spare: bool = True) -> float:
+        """After the tick's command is sent: a stage of the MPC update a deferring worker (real time) asked for.
+        The update is done in two stages on two ticks, each after its command (the reference with Ruckig at the
+        MPC's rate; then the preview and the problem, handed to the process, which solves while the loop waits for
+        its next tick): at once it took about as long as a whole tick's budget on a slow machine, and the next tick
+        then started late enough for its command to miss the deadline. ``spare=False`` (this tick's after-command
+        work was long already, e.g. a chunk was admitted) waits a tick. Returns the time it took, us."""
+        if self._deferred_mpc is None or not spare:
             return 0.0
         a0 = time.perf_counter()
-        t_s, q_rad, dq_rad_s, terms = self._deferred_mpc
-        self._deferred_mpc = None
-        self._mpc_update(t_s, q_rad, dq_rad_s, terms)
+        stage, t_s, q_rad, dq_rad_s, terms, rot = self._deferred_mpc
+        if stage == 0:
+            self._deferred_mpc[0], self._deferred_mpc[5] = 1, self._mpc_reference(t_s)
+        else:
+            self._deferred_mpc = None
+            self.mpc_worker.submit(t_s, self._mpc_problem(t_s, q_rad, dq_rad_s, terms, rot))
         return (time.perf_counter() - a0) * 1e6
 
     def missed_tick(self, q_rad: np.ndarray, dq_rad_s: np.ndarray) -> TickOutput:

@@ -278,14 +278,16 @@ class EpisodeRunner:
         if self._deferred_measurements:
             arrived, self._deferred_measurements = self._deferred_measurements, []
             self._fuse(arrived)
-        self._admit_due(t + self.dt_s)
-        return (time.perf_counter() - a0) * 1e6 + self.controller.end_tick()
+        admitted = self._admit_due(t + self.dt_s)
+        # a tick that admitted a chunk has had its share of work: the MPC's next stage waits a tick
+        return (time.perf_counter() - a0) * 1e6 + self.controller.end_tick(spare=admitted == 0)
 
-    def _admit_due(self, t: float) -> None:
+    def _admit_due(self, t: float) -> int:
         """Admit the chunks due by ``t`` (the splice check against the reference at ``t``) and activate them at
-        ``t``."""
+        ``t``; returns how many were due (admitted or refused)."""
         log, controller, executor = self.log, self.controller, self.executor
-        for entry in self.intake.due(t + self._eps):
+        due = self.intake.due(t + self._eps)
+        for entry in due:
             gap_m = controller.splice_distance_m(entry.chunk, t, entry.target_at_obs_m, entry.ee_at_obs_m)
             if self.intake.admit(entry, t, controller.active, gap_m=gap_m):
                 controller.activate(entry.chunk, t, entry.target_at_obs_m)
@@ -297,6 +299,7 @@ class EpisodeRunner:
                 self.next_plan_s = executor.after_activation(t, controller.active, self.next_plan_s)
             else:
                 self.next_plan_s = executor.after_refusal(t, self.next_plan_s)
+        return len(due)
 
     def _observe(self, k: int, t: float) -> Observation:
         log, gap = self.log, self._gap_ticks

@@ -108,8 +108,8 @@ def test_chunks_become_active_on_the_same_ticks_either_way(world):
     rt, _, _ = _episode(world, OnTime(), duration_s=1.5)
     assert len(sim.chunk_active_s) >= 2
     assert np.allclose(sim.chunk_active_s, rt.chunk_active_s)  # admitted after tick k's command, active at k + 1
-    # the same episode up to a tick's delay in fusion and MPC hand-over: the TCP paths stay within a millimetre
-    assert float(np.max(np.linalg.norm(sim.ee_pos_m - rt.ee_pos_m, axis=1))) < 1e-3
+    # the same episode up to a tick or two of delay in fusion and the MPC's hand-over: the TCP paths stay within 3 mm
+    assert float(np.max(np.linalg.norm(sim.ee_pos_m - rt.ee_pos_m, axis=1))) < 3e-3
 
 
 def test_simulated_time_records_the_work_real_time_does_after_the_command(world):
