@@ -149,6 +149,38 @@ def residual_features(base_pos_m, t_since_obs_s, chunk_span_s, meas_pos_m, meas_
     return np.concatenate([np.broadcast_to(p, lead + (p.shape[-1],)) for p in parts], axis=-1)
 
 
+def residual_feature_vector(base_pos_m: np.ndarray, t_since_obs_s: float, chunk_span_s: float,
+                            meas_pos_m: np.ndarray, meas_prev_pos_m: np.ndarray, meas_dt_s: float,
+                            tcp_pos_m: np.ndarray, tcp_vel_m_s: np.ndarray) -> np.ndarray:
+    """:func:`residual_features` for one sample (every position and velocity (3,), the times scalars), bit for bit
+    the same values in (FEATURE_DIM,) float64, without the broadcasting: the executor calls it at 100 Hz on the
+    command path (about 135 -> 25 us on a 2-core EPYC)."""
+    base = np.asarray(base_pos_m, dtype=np.float64)
+    meas = np.asarray(meas_pos_m, dtype=np.float64)
+    prev = np.asarray(meas_prev_pos_m, dtype=np.float64)
+    tcp = np.asarray(tcp_pos_m, dtype=np.float64)
+    tcp_vel = np.asarray(tcp_vel_m_s, dtype=np.float64)
+    for name, a in (("base_pos_m", base), ("meas_pos_m", meas), ("meas_prev_pos_m", prev), ("tcp_pos_m", tcp),
+                    ("tcp_vel_m_s", tcp_vel)):
+        if a.shape != (3,):
+            raise ValueError(f"residual_feature_vector: {name} must have shape (3,), got {a.shape}")
+    age = float(t_since_obs_s)
+    span = float(chunk_span_s)
+    mdt = float(meas_dt_s)
+    out = np.empty(FEATURE_DIM)
+    np.divide(meas - base, POS_SCALE_M, out=out[0:3])
+    np.divide(meas - tcp, POS_SCALE_M, out=out[3:6])
+    if mdt >= MIN_MEAS_DT_S:
+        np.divide((meas - prev) / mdt, VEL_SCALE_M_S, out=out[6:9])
+    else:
+        out[6:9] = 0.0
+    np.divide(tcp_vel, VEL_SCALE_M_S, out=out[9:12])
+    out[12] = age / span if span > 0 else 0.0
+    out[13] = age / TIME_SCALE_S
+    np.divide(meas - WORKSPACE_CENTRE_M, ABS_SCALE_M, out=out[14:17])
+    return out
+
+
 class _ResidualNet(nn.Module):
     """clip -> MLP (SiLU) -> norm squash; the torch twin of :meth:`ResidualPolicy.correction_m`."""
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from policy.residual import FEATURE_DIM, FEATURE_NAMES, ResidualConfig, ResidualPolicy, residual_features
+from policy.residual import FEATURE_DIM, FEATURE_NAMES, ResidualConfig, ResidualPolicy, residual_feature_vector, \
+    residual_features
 from scenarios.train_residual import TRAIN_SEED0, clip_norm, collect_samples, plan_episodes, split_episodes, train
 
 
@@ -101,6 +102,18 @@ def test_features_are_translation_invariant_but_the_absolute_columns():
     batch = residual_features(np.zeros((4, 2, 3)), np.zeros((4, 2)), 1.6, np.ones((4, 2, 3)), np.zeros((4, 2, 3)),
                               np.zeros((4, 2)), np.zeros((4, 2, 3)), np.zeros((4, 2, 3)))
     assert batch.shape == (4, 2, FEATURE_DIM) and np.all(batch[..., 6:9] == 0)
+
+
+def test_the_executors_one_sample_features_equal_the_batched_ones_bit_for_bit():
+    """The residual executor's 100 Hz path (``residual_feature_vector``) gives the training features exactly."""
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        args = [rng.normal(size=3), rng.uniform(0, 2), rng.choice([0.0, 1.6, rng.uniform(0, 2)]),
+                rng.normal(size=3), rng.normal(size=3), rng.choice([0.0, 5e-4, 1e-3, rng.uniform(0, 0.2)]),
+                rng.normal(size=3), rng.normal(size=3)]
+        assert np.array_equal(residual_feature_vector(*args), residual_features(*args))
+    with pytest.raises(ValueError, match="tcp_pos_m must have shape"):
+        residual_feature_vector(np.zeros(3), 0.1, 1.6, np.zeros(3), np.zeros(3), 0.1, np.zeros(2), np.zeros(3))
 
 
 def test_save_load_round_trip_and_missing_path(tmp_path):
