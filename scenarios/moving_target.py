@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers.qp_id import REALTIME_MAX_ITER as REALTIME_QP_MAX_ITER, QPConfig
 from controllers.retarget import RULES, RetargetConfig
 from controllers.target_estimator import FILTER_MODELS, EstimatorConfig
 from mmact_ctrl.config import MODES, StackConfig
@@ -223,6 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--mpc-phase-ms", type=_number(float, "--mpc-phase-ms", 0, True, 19.999), default=None,
                    help="hybrid: the MPC ticks are this long after each 20 ms mark (default 5 with --realtime, so the "
                         "MPC's work and the 100 Hz fusion fall on different ticks; 0 otherwise)")
+    r.add_argument("--qp-max-iter", type=_number(int, "--qp-max-iter", 1, True, 100000), default=None,
+                   help="OSQP's iteration cap in the 1 kHz QP; a solve not converged by then goes to DAQP's exact "
+                        "active-set solve (default 100 with --realtime, which bounds the command path's worst case; "
+                        "400 otherwise, as every simulated-time study ran)")
     r.add_argument("--rt-priority", type=_number(int, "--rt-priority", 0, True, 99), default=0,
                    help="real time: run the loop's thread under SCHED_FIFO at this priority (0: normal scheduling; "
                         "needs the right to, else it runs at normal priority and says so)")
@@ -250,7 +255,16 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
         # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
+        qp=QPConfig(max_iter=qp_max_iter(args)),
     )
+
+
+def qp_max_iter(args: argparse.Namespace) -> int:
+    """``--qp-max-iter``, else ``REALTIME_QP_MAX_ITER`` in real time and ``QPConfig.max_iter`` in simulated time."""
+    value = getattr(args, "qp_max_iter", None)
+    if value is not None:
+        return int(value)
+    return REALTIME_QP_MAX_ITER if getattr(args, "realtime", False) else QPConfig().max_iter
 
 
 def mpc_phase_ms(args: argparse.Namespace) -> float:
