@@ -218,7 +218,28 @@ def _realtime_episode(log: EpisodeLog) -> dict:
         "control_command_success_rate": float(d["control_command_success_rate"]),
         "realtime_rate": float(d["realtime_rate"]),
         "exec_us": [float(x) for x in (log.rt_exec_us if log.rt_exec_us is not None else [])],
+        "late_ticks": _late_ticks(log),
     }
+
+
+#: at most this many late ticks are described per episode
+MAX_LATE_TICKS = 100
+
+
+def _late_ticks(log: EpisodeLog) -> list[dict]:
+    """Each tick whose command was late (the first ``MAX_LATE_TICKS``): its index, how late it started, its whole
+    work, its command path and its after-command work, us: whether a late command came from our work (a long command
+    path) or from outside it (a late start, or work much longer than its parts: the thread did not run)."""
+    late = log.rt_late_ticks
+    if late is None or not len(late):
+        return []
+
+    def at(series, k: int) -> float | None:
+        return float(series[k]) if series is not None and 0 <= k < len(series) else None
+
+    return [{"k": int(k), "start_late_us": at(log.rt_jitter_us, int(k)), "work_us": at(log.rt_exec_us, int(k)),
+             "command_path_us": at(log.tick_us, int(k)), "after_us": at(log.after_us, int(k))}
+            for k in np.asarray(late, dtype=int)[:MAX_LATE_TICKS]]
 
 
 def _realtime_summary(episodes: list[dict], ticks: int) -> dict:

@@ -75,6 +75,15 @@ def test_an_injected_slow_tick_is_an_overrun_and_a_missed_command(world):
     # the robot re-applied the last torque it received at the late tick
     assert np.array_equal(log.tau_cmd_nm[300], log.tau_cmd_nm[299])
     assert np.all(np.isfinite(log.tau_cmd_nm)) and int(np.count_nonzero(log.safety_mask)) == 0
+    # the episode's metrics describe each late tick: the stalled one did 3 ms of work after starting on time
+    from mmact_ctrl.metrics import _realtime_episode
+
+    log.deadline = stats
+    log.rt_exec_us, log.rt_jitter_us, log.rt_late_ticks = pacer.exec_us, pacer.jitter_us, pacer.late_ticks
+    late = {t["k"]: t for t in _realtime_episode(log)["late_ticks"]}
+    assert set(late) == {int(k) for k in pacer.late_ticks}
+    assert late[300]["work_us"] >= 3000 and late[300]["start_late_us"] < 1000
+    assert late[300]["command_path_us"] == float(log.tick_us[300])
 
 
 def test_twenty_late_commands_in_a_row_abort_as_on_the_robot(world):
