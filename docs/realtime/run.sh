@@ -8,7 +8,13 @@ PRIO=${PRIO:-10}
 
 # 1. hybrid, the scripted expert served in another process, 10 episodes of 6 s in real time (with and without FIFO)
 python -m scenarios.moving_target --realtime --rt-priority $PRIO --source expert --mode hybrid --episodes 10 --quiet \
-  --json $OUT/expert_hybrid_rt.json --rerun $OUT/expert_hybrid_rt.rrd > $OUT/expert_hybrid_rt.txt
+  --json $OUT/expert_hybrid_rt.json > $OUT/expert_hybrid_rt.txt
+# a recording of one episode (recording is work on the loop's thread too: kept out of the figure above)
+python -m scenarios.moving_target --realtime --rt-priority $PRIO --source expert --mode hybrid --episodes 1 --quiet \
+  --json $OUT/expert_hybrid_rt_recorded.json --rerun $OUT/expert_hybrid_rt.rrd > $OUT/expert_hybrid_rt_recorded.txt
+# one 60 s episode: no drift
+python -m scenarios.moving_target --realtime --rt-priority $PRIO --source expert --mode hybrid --target random_walk \
+  --duration-s 60 --episodes 1 --quiet --json $OUT/expert_hybrid_60s.json > $OUT/expert_hybrid_60s.txt
 python -m scenarios.moving_target --realtime --rt-priority 0 --source expert --mode hybrid --episodes 10 --quiet \
   --json $OUT/expert_hybrid_rt_noprio.json > $OUT/expert_hybrid_rt_noprio.txt
 
