@@ -130,54 +130,28 @@ def residual_features(base_pos_m, t_since_obs_s, chunk_span_s, meas_pos_m, meas_
     age = np.asarray(t_since_obs_s, dtype=np.float64)
     span = np.asarray(chunk_span_s, dtype=np.float64)
     mdt = np.asarray(meas_dt_s, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ok = mdt >= MIN_MEAS_DT_S
-        vel = np.where(ok[..., None], (meas - prev) / np.where(ok, mdt, 1.0)[..., None], 0.0)
-        phase = np.where(span > 0, age / np.where(span > 0, span, 1.0), 0.0)
-    shape = np.broadcast_shapes(base.shape, meas.shape, prev.shape, tcp.shape, tcp_vel.shape,
-                                age.shape + (3,), span.shape + (3,), mdt.shape + (3,))
-    lead = shape[:-1]
-    parts = [
-        (meas - base) / POS_SCALE_M,
-        (meas - tcp) / POS_SCALE_M,
-        vel / VEL_SCALE_M_S,
-        tcp_vel / VEL_SCALE_M_S,
-        phase[..., None],
-        (age / TIME_SCALE_S)[..., None],
-        (meas - WORKSPACE_CENTRE_M) / ABS_SCALE_M,
-    ]
-    return np.concatenate([np.broadcast_to(p, lead + (p.shape[-1],)) for p in parts], axis=-1)
-
-
-def residual_feature_vector(base_pos_m: np.ndarray, t_since_obs_s: float, chunk_span_s: float,
-                            meas_pos_m: np.ndarray, meas_prev_pos_m: np.ndarray, meas_dt_s: float,
-                            tcp_pos_m: np.ndarray, tcp_vel_m_s: np.ndarray) -> np.ndarray:
-    """:func:`residual_features` for one sample (every position and velocity (3,), the times scalars), bit for bit
-    the same values in (FEATURE_DIM,) float64, without the broadcasting: the executor calls it at 100 Hz on the
-    command path (about 135 -> 25 us on a 2-core EPYC)."""
-    base = np.asarray(base_pos_m, dtype=np.float64)
-    meas = np.asarray(meas_pos_m, dtype=np.float64)
-    prev = np.asarray(meas_prev_pos_m, dtype=np.float64)
-    tcp = np.asarray(tcp_pos_m, dtype=np.float64)
-    tcp_vel = np.asarray(tcp_vel_m_s, dtype=np.float64)
-    for name, a in (("base_pos_m", base), ("meas_pos_m", meas), ("meas_prev_pos_m", prev), ("tcp_pos_m", tcp),
-                    ("tcp_vel_m_s", tcp_vel)):
-        if a.shape != (3,):
-            raise ValueError(f"residual_feature_vector: {name} must have shape (3,), got {a.shape}")
-    age = float(t_since_obs_s)
-    span = float(chunk_span_s)
-    mdt = float(meas_dt_s)
-    out = np.empty(FEATURE_DIM)
-    np.divide(meas - base, POS_SCALE_M, out=out[0:3])
-    np.divide(meas - tcp, POS_SCALE_M, out=out[3:6])
-    if mdt >= MIN_MEAS_DT_S:
-        np.divide((meas - prev) / mdt, VEL_SCALE_M_S, out=out[6:9])
+    lead = np.broadcast_shapes(base.shape[:-1], meas.shape[:-1], prev.shape[:-1], tcp.shape[:-1],
+                               tcp_vel.shape[:-1], age.shape, span.shape, mdt.shape)
+    out = np.empty(lead + (FEATURE_DIM,))  # written column block by column block (the executor calls it at 100 Hz)
+    np.divide(meas - base, POS_SCALE_M, out=out[..., 0:3])
+    np.divide(meas - tcp, POS_SCALE_M, out=out[..., 3:6])
+    if mdt.ndim == 0:  # one sample: no masked division (and no errstate, which costs more than the rest)
+        if mdt >= MIN_MEAS_DT_S:
+            np.divide((meas - prev) / mdt, VEL_SCALE_M_S, out=out[..., 6:9])
+        else:
+            out[..., 6:9] = 0.0
     else:
-        out[6:9] = 0.0
-    np.divide(tcp_vel, VEL_SCALE_M_S, out=out[9:12])
-    out[12] = age / span if span > 0 else 0.0
-    out[13] = age / TIME_SCALE_S
-    np.divide(meas - WORKSPACE_CENTRE_M, ABS_SCALE_M, out=out[14:17])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ok = mdt >= MIN_MEAS_DT_S
+            vel = np.where(ok[..., None], (meas - prev) / np.where(ok, mdt, 1.0)[..., None], 0.0)
+        np.divide(vel, VEL_SCALE_M_S, out=out[..., 6:9])
+    np.divide(tcp_vel, VEL_SCALE_M_S, out=out[..., 9:12])
+    if span.ndim == 0:
+        out[..., 12] = age / span if span > 0 else 0.0
+    else:
+        out[..., 12] = np.where(span > 0, age / np.where(span > 0, span, 1.0), 0.0)
+    np.divide(age, TIME_SCALE_S, out=out[..., 13])
+    np.divide(meas - WORKSPACE_CENTRE_M, ABS_SCALE_M, out=out[..., 14:17])
     return out
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.qp_id import REALTIME_MAX_ITER as REALTIME_QP_MAX_ITER, QPConfig
+from controllers.qp_id import REALTIME_MAX_ITER, QPConfig
 from controllers.retarget import RULES, RetargetConfig
 from controllers.target_estimator import FILTER_MODELS, EstimatorConfig
 from mmact_ctrl.config import MODES, StackConfig
@@ -260,11 +260,11 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
 
 
 def qp_max_iter(args: argparse.Namespace) -> int:
-    """``--qp-max-iter``, else ``REALTIME_QP_MAX_ITER`` in real time and ``QPConfig.max_iter`` in simulated time."""
+    """``--qp-max-iter``, else ``controllers.qp_id.REALTIME_MAX_ITER`` in real time and ``QPConfig.max_iter`` in simulated time."""
     value = getattr(args, "qp_max_iter", None)
     if value is not None:
         return int(value)
-    return REALTIME_QP_MAX_ITER if getattr(args, "realtime", False) else QPConfig().max_iter
+    return REALTIME_MAX_ITER if getattr(args, "realtime", False) else QPConfig().max_iter
 
 
 def mpc_phase_ms(args: argparse.Namespace) -> float:

@@ -48,9 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration-s", type=_number(float, "--duration-s", 0, False), default=6.0, help="episode length (s)")
     p.add_argument("--rt-priority", type=_number(int, "--rt-priority", 0, True, 99), default=10,
                    help="SCHED_FIFO priority of the real-time loop's thread (0: normal scheduling)")
-    p.add_argument("--qp-max-iter", type=_number(int, "--qp-max-iter", 1, True, 100000), default=None,
+    p.add_argument("--qp-max-iter", type=_number(int, "--qp-max-iter", 1, True, 100000), default=REALTIME_MAX_ITER,
                    help="OSQP's iteration cap in the QP, the same in both runs so that only time differs (default: "
-                        "the real-time cap, 100)")
+                        "the real-time cap)")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (report.md, results.json)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -61,7 +61,7 @@ def _main_job_args(args, target: str, realtime: bool, latency_ms: float | None =
 
     argv = ["--source", args.source, "--target", target, "--speed", str(args.speed), "--replan-hz", str(args.replan_hz),
             "--episodes", str(args.episodes), "--duration-s", str(args.duration_s), "--mpc-phase-ms", "5",
-            "--mode", *args.modes, "--quiet", "--qp-max-iter", str(args.qp_max_iter or REALTIME_MAX_ITER)]
+            "--mode", *args.modes, "--quiet", "--qp-max-iter", str(args.qp_max_iter)]
     for item in args.source_arg:
         argv += ["--source-arg", item]
     if args.checkpoint:
@@ -130,7 +130,7 @@ def report(results: dict, args) -> str:
              f"{args.duration_s:g} s episodes, replan {args.replan_hz:g} Hz, target speed {args.speed:g} m/s",
              "- real time: the loop on the wall clock at 1 kHz, the source in its own process, each chunk active when "
              "it arrives; simulated: the same seeds with `--latency-ms` = the median round trip measured in real time; "
-             f"both with the MPC phase 5 ms and the QP's iteration cap {args.qp_max_iter or REALTIME_MAX_ITER}.",
+             f"both with the MPC phase 5 ms and the QP's iteration cap {args.qp_max_iter}.",
              "- success: successes/n [95 % Wilson]; Δ = real minus simulated (Newcombe's paired interval, exact "
              "McNemar); final error: mean, Δ mean paired difference [95 % t-interval], Wilcoxon.", ""]
     for target, res in results.items():

@@ -31,7 +31,7 @@ def test_verdicts_need_significance_and_a_difference_that_matters():
 
 def test_report_lists_only_the_cells_where_simulation_is_optimistic():
     args = argparse.Namespace(source="expert", modes=["inpaint", "hybrid"], episodes=10, duration_s=6.0,
-                              replan_hz=1.0, speed=0.2, qp_max_iter=None)
+                              replan_hz=1.0, speed=0.2, qp_max_iter=100)
     results = {"reversal": {"latency_ms": 2.5, "rows": [_row(mode="inpaint", diff_final_mm=2e-5, p_wilcoxon=0.037),
                                                         _row(mode="hybrid", diff_final_mm=6.0, p_wilcoxon=0.01)]}}
     text = report(results, args)

@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from policy.residual import FEATURE_DIM, FEATURE_NAMES, ResidualConfig, ResidualPolicy, residual_feature_vector, \
-    residual_features
+from policy.residual import FEATURE_DIM, FEATURE_NAMES, ResidualConfig, ResidualPolicy, residual_features
 from scenarios.train_residual import TRAIN_SEED0, clip_norm, collect_samples, plan_episodes, split_episodes, train
 
 
@@ -105,15 +104,16 @@ def test_features_are_translation_invariant_but_the_absolute_columns():
 
 
 def test_the_executors_one_sample_features_equal_the_batched_ones_bit_for_bit():
-    """The residual executor's 100 Hz path (``residual_feature_vector``) gives the training features exactly."""
+    """The residual executor's 100 Hz call (one sample, scalar times) gives the training features (batched) exactly."""
     rng = np.random.default_rng(2)
-    for _ in range(300):
-        args = [rng.normal(size=3), rng.uniform(0, 2), rng.choice([0.0, 1.6, rng.uniform(0, 2)]),
-                rng.normal(size=3), rng.normal(size=3), rng.choice([0.0, 5e-4, 1e-3, rng.uniform(0, 0.2)]),
-                rng.normal(size=3), rng.normal(size=3)]
-        assert np.array_equal(residual_feature_vector(*args), residual_features(*args))
+    rows = [[rng.normal(size=3), rng.uniform(0, 2), rng.choice([0.0, 1.6, rng.uniform(0, 2)]),
+             rng.normal(size=3), rng.normal(size=3), rng.choice([0.0, 5e-4, 1e-3, rng.uniform(0, 0.2)]),
+             rng.normal(size=3), rng.normal(size=3)] for _ in range(300)]
+    batched = residual_features(*[np.stack([np.asarray(r[i], dtype=float) for r in rows]) for i in range(8)])
+    for i, args in enumerate(rows):
+        assert np.array_equal(residual_features(*args), batched[i])
     with pytest.raises(ValueError, match="tcp_pos_m must have shape"):
-        residual_feature_vector(np.zeros(3), 0.1, 1.6, np.zeros(3), np.zeros(3), 0.1, np.zeros(2), np.zeros(3))
+        residual_features(np.zeros(3), 0.1, 1.6, np.zeros(3), np.zeros(3), 0.1, np.zeros(2), np.zeros(3))
 
 
 def test_save_load_round_trip_and_missing_path(tmp_path):

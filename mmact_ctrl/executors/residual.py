@@ -96,7 +96,7 @@ class ResidualExecutor(ClockedExecutor):
         return z_last, z_prev, max(t_last - t_prev, 0.0)
 
     def _correction(self, t_s: float, ref: ChunkReference) -> np.ndarray:
-        from policy.residual import residual_feature_vector
+        from policy.residual import residual_features
 
         meas = self._measurements()
         terms = self.controller.terms
@@ -105,8 +105,8 @@ class ResidualExecutor(ClockedExecutor):
         z, z_prev, gap_s = meas
         base = ref.sample(t_s)[0][:3]
         chunk = ref.chunk
-        feats = residual_feature_vector(base, t_s - chunk.t0_s, chunk.horizon * chunk.dt_s, z, z_prev, gap_s,
-                                        terms.pos_m, terms.vel[:3])
+        feats = residual_features(base, t_s - chunk.t0_s, chunk.horizon * chunk.dt_s, z, z_prev, gap_s,
+                                  terms.pos_m, terms.vel[:3])
         corr = np.asarray(self.policy.correction_m(feats), dtype=float).reshape(3)
         return corr if np.all(np.isfinite(corr)) else ZERO3
 
