@@ -11,3 +11,44 @@ def _one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+def _first_query_aims(source, seeds, per_query=None):
+    """A shipped checkpoint's first query on real rendered static scenes (one per seed, the checkpoint's own scene):
+    each chunk is checked valid (token range, finite, inside the action tokenizer's bounds), ``per_query(source, obs,
+    chunk, world)`` adds a checkpoint's own checks. Returns the arrays (start, end, other), m: the arm's start, the
+    chunk's last waypoint and the other ball, each against the instructed ball."""
+    import numpy as np
+
+    from mmact_ctrl.chunk import Observation
+    from scenarios.world.factory import make_world, policy_scene
+
+    world = make_world("static", **policy_scene(source))
+    lo, hi = source.action_token_range
+    tok = source.policy.action_tokenizer
+    start, end, other = [], [], []
+    try:
+        for seed in seeds:
+            world.reset(seed)
+            obs = Observation(t0_s=0.0, q_rad=world.state().q_rad, dq_rad_s=np.zeros(7),
+                              ee_pos_m=world.home_tcp_pos_m(), ee_rotvec_rad=np.zeros(3), gripper_m=0.08,
+                              target_pos_m=world.target_pos_m(), image=world.render(), instruction=world.instruction)
+            chunk = source.plan(obs)
+            assert chunk.tokens.shape == (16, 7) and chunk.tokens.min() >= lo and chunk.tokens.max() < hi
+            assert np.all(np.isfinite(chunk.waypoints))
+            assert np.all((chunk.waypoints >= tok.low) & (chunk.waypoints <= tok.high))
+            if per_query is not None:
+                per_query(source, obs, chunk, world)
+            aim = chunk.waypoints[-1, :3]
+            start.append(np.linalg.norm(world.home_tcp_pos_m() - world.target_pos_m()))
+            end.append(np.linalg.norm(aim - world.target_pos_m()))
+            other.append(np.linalg.norm(aim - world.objects_pos_m()[1 - world.target_index]))
+    finally:
+        world.close()
+    return np.array(start), np.array(end), np.array(other)
+
+
+@pytest.fixture
+def first_query_aims():
+    """:func:`_first_query_aims`: the shared loop of the shipped checkpoints' aim tests."""
+    return _first_query_aims

@@ -261,7 +261,7 @@ def test_stage0_init_refreshes_the_image_tokenizer_and_keeps_the_model(tmp_path)
 SHIPPED_3D = Path(__file__).resolve().parents[1] / "policy" / "checkpoints" / "mmact_3d.pt"
 
 
-def test_the_shipped_3d_checkpoint_aims_from_two_views_and_two_frames_at_the_instructed_ball():
+def test_the_shipped_3d_checkpoint_aims_from_two_views_and_two_frames_at_the_instructed_ball(first_query_aims):
     """The shipped 3-D policy (``policy/checkpoints/mmact_3d.pt``): <= 20 MB, two cameras x two frames, balls
     anywhere in the box; from the first query of real rendered scenes its chunk is valid and ends nearer the
     instructed ball than the arm starts, and nearer it than the other ball."""
@@ -273,28 +273,11 @@ def test_the_shipped_3d_checkpoint_aims_from_two_views_and_two_frames_at_the_ins
     assert source.camera_names == ("front", "side") and source.prev_frame_gap_s == pytest.approx(0.4)
     scene = policy_scene(source)
     assert scene["plane_z_m"] == 0.0 and scene["cameras"] == ("front", "side")
-    world = make_world("static", **scene)
-    lo, hi = source.action_token_range
-    start, end, other = [], [], []
-    try:
-        for seed in range(9000, 9008):
-            world.reset(seed)
-            obs = Observation(t0_s=0.0, q_rad=world.state().q_rad, dq_rad_s=np.zeros(7), ee_pos_m=world.home_tcp_pos_m(),
-                              ee_rotvec_rad=np.zeros(3), gripper_m=0.08, target_pos_m=world.target_pos_m(),
-                              image=world.render(), instruction=world.instruction)
-            views = source.views(obs)
-            assert views.shape == (4, 96, 96, 3)  # [front, side] now, and (first query) again as the earlier frame
-            chunk = source.plan(obs)
-            assert chunk.tokens.shape == (16, 7) and chunk.tokens.min() >= lo and chunk.tokens.max() < hi
-            tok = source.policy.action_tokenizer
-            assert np.all(np.isfinite(chunk.waypoints)) and np.all((chunk.waypoints >= tok.low) & (chunk.waypoints <= tok.high))
-            balls = world.objects_pos_m()
-            aim = chunk.waypoints[-1, :3]
-            start.append(np.linalg.norm(world.home_tcp_pos_m() - world.target_pos_m()))
-            end.append(np.linalg.norm(aim - world.target_pos_m()))
-            other.append(np.linalg.norm(aim - balls[1 - world.target_index]))
-    finally:
-        world.close()
-    start, end, other = map(np.array, (start, end, other))
+
+    def views_of_the_first_query(source, obs, chunk, world):
+        # [front, side] now, and (first query) again as the earlier frame
+        assert source.views(obs).shape == (4, 96, 96, 3)
+
+    start, end, other = first_query_aims(source, range(9000, 9008), views_of_the_first_query)
     assert np.mean(end) < 0.5 * np.mean(start), (end, start)
     assert np.mean(end < other) >= 0.75, (end, other)

@@ -229,45 +229,26 @@ def test_token_caches_accumulate_and_one_of_another_detector_or_tokenizer_is_ref
 SHIPPED_BOX = Path(__file__).resolve().parents[1] / "policy" / "checkpoints" / "mmact_3d_box.pt"
 
 
-def test_the_shipped_box_checkpoint_aims_from_its_views_at_the_instructed_ball():
+def test_the_shipped_box_checkpoint_aims_from_its_views_at_the_instructed_ball(first_query_aims):
     """The shipped box-layout checkpoint (``policy/checkpoints/mmact_3d_box.pt``, issue 25): <= 20 MB, the box cameras
     now and 0.4 s ago; from the first query of real rendered scenes its chunk is valid, ends nearer the instructed ball
     than the arm starts and nearer it than the other ball, and its aux target puts the ball inside the workspace."""
-    from mmact_ctrl.chunk import Observation
     from mmact_ctrl.policy_source import PolicyChunkSource
-    from scenarios.world.factory import make_world, policy_scene
+    from scenarios.world.factory import policy_scene
 
     assert SHIPPED_BOX.is_file() and SHIPPED_BOX.stat().st_size <= 20e6
     source = PolicyChunkSource(SHIPPED_BOX)
     assert source.camera_names == BOX_CAMERAS and source.prev_frame_gap_s == pytest.approx(0.4)
-    scene = policy_scene(source)
-    assert scene["cameras"] == BOX_CAMERAS
-    world = make_world("static", **scene)
-    lo, hi = source.action_token_range
+    assert policy_scene(source)["cameras"] == BOX_CAMERAS
     tok = source.policy.action_tokenizer
-    start, end, other, ball_err = [], [], [], []
-    try:
-        for seed in range(9000, 9008):
-            world.reset(seed)
-            now = world.render()
-            obs = Observation(t0_s=0.0, q_rad=world.state().q_rad, dq_rad_s=np.zeros(7),
-                              ee_pos_m=world.home_tcp_pos_m(), ee_rotvec_rad=np.zeros(3), gripper_m=0.08,
-                              target_pos_m=world.target_pos_m(), image=now, instruction=world.instruction)
-            chunk = source.plan(obs)
-            assert chunk.tokens.shape == (16, 7) and chunk.tokens.min() >= lo and chunk.tokens.max() < hi
-            assert np.all(np.isfinite(chunk.waypoints))
-            assert np.all((chunk.waypoints >= tok.low) & (chunk.waypoints <= tok.high))
-            ball = source.policy.predict_ball_positions(source.views(obs), obs.instruction, obs.q_rad)
-            assert ball.shape == (2, 3) and np.all((ball >= tok.low[:3]) & (ball <= tok.high[:3]))
-            balls = world.objects_pos_m()
-            aim = chunk.waypoints[-1, :3]
-            start.append(np.linalg.norm(world.home_tcp_pos_m() - world.target_pos_m()))
-            end.append(np.linalg.norm(aim - world.target_pos_m()))
-            other.append(np.linalg.norm(aim - balls[1 - world.target_index]))
-            ball_err.append(np.linalg.norm(ball[0] - world.target_pos_m()))
-    finally:
-        world.close()
-    start, end, other = map(np.array, (start, end, other))
+    ball_err = []
+
+    def aux_ball(source, obs, chunk, world):
+        ball = source.policy.predict_ball_positions(source.views(obs), obs.instruction, obs.q_rad)
+        assert ball.shape == (2, 3) and np.all((ball >= tok.low[:3]) & (ball <= tok.high[:3]))
+        ball_err.append(np.linalg.norm(ball[0] - world.target_pos_m()))
+
+    start, end, other = first_query_aims(source, range(9000, 9008), aux_ball)
     assert np.mean(end) < 0.5 * np.mean(start), (end, start)
     assert np.mean(end < other) >= 0.75, (end, other)
     assert np.median(ball_err) < 0.1, ball_err  # the aux target finds the instructed ball to within 10 cm

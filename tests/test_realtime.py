@@ -33,11 +33,17 @@ def world():
     w.close()
 
 
-def _host_stalled(log) -> bool:
-    """The episode aborted on 20 late commands in a row: on a shared 2-core VM that is a host stall (every command path
-    several times slower for ~20 ms, docs/realtime/README.md) as often as our own work. The tests below re-run such an
-    episode once; a second abort fails them."""
-    return log.abort is not None and log.abort.get("reason") == "communication_constraints_violation"
+def _once_more_if_the_host_stalled(run):
+    """``run()`` (a wall-clock episode; it returns its log, or a tuple whose first item is the log), re-run once when
+    the episode aborted on 20 late commands in a row or missed more than the tolerance in a window of 100 ticks: on a
+    shared 2-core VM that is a host stall (every command path several times slower for ~20 ms,
+    docs/realtime/README.md) as often as our own work. The re-run's counts decide the test's assertions."""
+    out = run()
+    log = out[0] if isinstance(out, tuple) else out
+    aborted = log.abort is not None and log.abort.get("reason") == "communication_constraints_violation"
+    window_min = (log.deadline or {}).get("control_command_success_rate", 1.0)
+    stalled = aborted or window_min < 1.0 - 2 * OVERRUN_TOLERANCE
+    return run() if stalled else out
 
 
 def test_a_short_real_time_episode_holds_its_deadlines(world):
@@ -47,9 +53,7 @@ def test_a_short_real_time_episode_holds_its_deadlines(world):
         with RealtimeSession(world, expert, controller, PACED) as session:
             return session.episode(0)
 
-    log = run()
-    if _host_stalled(log):
-        log = run()
+    log = _once_more_if_the_host_stalled(run)
     d = log.deadline
     assert d["ticks"] == 1000 and len(log.t_s) == 1000 and log.abort is None
     assert d["overrun_rate"] <= OVERRUN_TOLERANCE, d
@@ -80,9 +84,7 @@ def _stalled_episode(world, stall_s: float, at_tick: int = 300):
 
 
 def test_an_injected_slow_tick_is_an_overrun_and_a_missed_command(world):
-    log, stats, pacer = _stalled_episode(world, 0.003)
-    if _host_stalled(log):
-        log, stats, pacer = _stalled_episode(world, 0.003)
+    log, stats, pacer = _once_more_if_the_host_stalled(lambda: _stalled_episode(world, 0.003))
     assert 300 in pacer.late_ticks and stats["overruns"] >= 1 and log.late_commands >= 1
     assert log.missed_ticks >= 1 and log.abort is None  # 3 late commands in a row: survived
     assert stats["cycles_missed"] >= 1  # the ticks after it started a period late
@@ -119,9 +121,7 @@ def test_the_mpc_process_handing_late_plans_is_survived(world):
             worker.max_solve_s = 1e-6  # every plan comes back too late
             return session.episode(1), worker
 
-    log, worker = run()
-    if _host_stalled(log):
-        log, worker = run()
+    log, worker = _once_more_if_the_host_stalled(run)
     m = episode_metrics(log)
     assert worker.late >= 10 and m["mpc_failures"] >= 10
     assert log.mpc_bypass_ticks > 0  # no good plan: the QP tracked the smoothed reference
@@ -145,9 +145,7 @@ def test_a_real_time_episode_with_a_served_source_runs_end_to_end():
                 source.close()
                 w.close()
 
-    log = run()
-    if _host_stalled(log):
-        log = run()
+    log = _once_more_if_the_host_stalled(run)
     m = episode_metrics(log)
     assert len(log.chunk_active_s) >= 2 and sum(log.rejections.values()) == 0
     assert log.deadline["ticks"] == 2000 and m["limit_violations"] == 0
