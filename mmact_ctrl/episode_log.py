@@ -26,7 +26,8 @@ class EpisodeLog:
     the measurements that arrived, the MPC's 50 Hz update: reference, preview, problem); simulated time does the same
     work before the command (results unchanged) and records it here too. Real time: ``late_commands`` commands computed after their cycle's deadline (they
     count in ``missed_ticks`` too: the robot re-applied the last torque), ``deadline`` the pacer's statistics
-    (``mmact_ctrl.realtime.pacer``) with its per-tick ``rt_exec_us`` / ``rt_jitter_us`` / ``rt_late_ticks``,
+    (``mmact_ctrl.realtime.pacer``) with its per-tick ``rt_exec_us`` / ``rt_cpu_us`` (the loop thread's CPU time in the
+    work) / ``rt_jitter_us`` / ``rt_late_ticks``,
     ``recording`` (when the runner records: the target
     estimate at 100 Hz, the activated chunks, the MPC previews and the frames each query was answered from).
     """
@@ -79,6 +80,7 @@ class EpisodeLog:
     deadline: dict | None = None
     rt_exec_us: np.ndarray | None = None
     rt_jitter_us: np.ndarray | None = None
+    rt_cpu_us: np.ndarray | None = None
     rt_late_ticks: np.ndarray | None = None
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)

@@ -228,8 +228,10 @@ MAX_LATE_TICKS = 100
 
 def _late_ticks(log: EpisodeLog) -> list[dict]:
     """Each tick whose command was late (the first ``MAX_LATE_TICKS``): its index, how late it started, its whole
-    work, its command path and its after-command work, us: whether a late command came from our work (a long command
-    path) or from outside it (a late start, or work much longer than its parts: the thread did not run)."""
+    work, the loop thread's CPU time in that work, its command path and its after-command work, us: whether a late
+    command came from our work (a long command path) or from outside it (a late start; CPU time well under the work:
+    the thread did not run; CPU time equal to a work far above the usual: the CPU ran slowly, a contended host, which
+    ``python -m mmact_ctrl.realtime.host_check`` measures with no work of ours)."""
     late = log.rt_late_ticks
     if late is None or not len(late):
         return []
@@ -238,7 +240,7 @@ def _late_ticks(log: EpisodeLog) -> list[dict]:
         return float(series[k]) if series is not None and 0 <= k < len(series) else None
 
     return [{"k": int(k), "start_late_us": at(log.rt_jitter_us, int(k)), "work_us": at(log.rt_exec_us, int(k)),
-             "command_path_us": at(log.tick_us, int(k)), "after_us": at(log.after_us, int(k))}
+             "cpu_us": at(log.rt_cpu_us, int(k)), "command_path_us": at(log.tick_us, int(k)), "after_us": at(log.after_us, int(k))}
             for k in np.asarray(late, dtype=int)[:MAX_LATE_TICKS]]
 
 

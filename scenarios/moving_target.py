@@ -351,9 +351,9 @@ def realtime_source_args(args: argparse.Namespace):
     settings.check()
     if settings.kind == "remote":
         return args, None
-    from mmact_ctrl.realtime.session import _cpu_split
+    from mmact_ctrl.realtime.loop_thread import cpu_split
 
-    _, workers = _cpu_split(0)
+    _, workers = cpu_split(0)
     served = ServedSource(serve_argv(settings), cpus=workers)
     remote = argparse.Namespace(**{**vars(args), "source": served.url, "checkpoint": None, "source_arg": [],
                                    "action_steps": 1, "refine_bins": None})

@@ -14,7 +14,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.metrics import episode_metrics
 from mmact_ctrl.mpc_worker import ProcessMPC
-from mmact_ctrl.realtime.pacer import WallClockPacer, deadline_stats
+from mmact_ctrl.realtime.pacer import PacerConfig, WallClockPacer, deadline_stats
 from mmact_ctrl.realtime.session import RealtimeConfig, RealtimeSession
 from scenarios.world.factory import make_expert, make_world
 
@@ -130,6 +130,9 @@ def test_an_injected_slow_tick_is_an_overrun_and_a_missed_command(world, monkeyp
     assert late[100]["work_us"] >= 3000 and late[100]["work_us"] == float(pacer.exec_us[100])
     assert late[100]["start_late_us"] == float(pacer.jitter_us[100])
     assert late[100]["command_path_us"] == float(log.tick_us[100])
+    # and the loop thread's CPU time in that work: it spun, so it ran (at most its wall time)
+    assert late[100]["cpu_us"] == float(pacer.cpu_us[100])
+    assert 0 < late[100]["cpu_us"] <= 1.05 * late[100]["work_us"] + 50
 
 
 def test_twenty_late_commands_in_a_row_abort_as_on_the_robot(world, monkeypatch):
@@ -219,6 +222,34 @@ def test_the_viewer_without_a_display_is_one_line():
     assert proc.returncode == 2
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "--viewer needs a display" in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_the_pacer_keeps_the_threads_cpu_time_beside_the_wall_time():
+    """A tick that waited (preempted, or another thread held the GIL) has less CPU time than work: exact with fake
+    clocks (each read of the wall clock moves it 1 ns, so that the pacer's spin ends)."""
+    wall, cpu = [0.0], [0.0]
+
+    def clock():
+        wall[0] += 1e-9
+        return wall[0]
+
+    def sleep(s):
+        wall[0] += s
+
+    class Runner:
+        n_ticks, k, done = 3, 0, False
+
+        def advance(self, t_s):
+            wall[0] += 0.0004
+            cpu[0] += 0.0001 if self.k == 1 else 0.0004  # tick 1 waited 300 us of its 400
+            self.k += 1
+            self.done = self.k >= self.n_ticks
+
+    pacer = WallClockPacer(0.001, PacerConfig(spin_s=0.0, start_delay_s=0.0), clock=clock, sleep=sleep,
+                           cpu_clock=lambda: cpu[0])
+    pacer.run(Runner())
+    assert np.allclose(pacer.exec_us, 400, atol=0.1)
+    assert np.allclose(pacer.cpu_us, [400, 100, 400])
 
 
 def test_deadline_statistics_from_known_ticks():

@@ -18,6 +18,10 @@ Statistics (:func:`deadline_stats`), per episode:
 ``jitter_us``                  how late each tick started: mean / std / p99 / max, us;
 ``control_command_success_rate``  libfranka's share of commands received, the minimum over windows of 100 ticks;
 ``realtime_rate``              simulated time over wall time (Drake's ``get_actual_realtime_rate``; 1.0 on time).
+
+Per tick the pacer also keeps the loop thread's CPU time over the tick's work (``cpu_us``): equal to the work's wall
+time, the thread ran the whole time (a slow tick had more to do, or the CPU ran slowly: a contended host); much less,
+it waited (preempted, or another thread held the GIL).
 """
 
 from __future__ import annotations
@@ -63,10 +67,12 @@ class WallClockPacer:
     """
 
     def __init__(self, dt_s: float, config: PacerConfig = PacerConfig(),
-                 clock: Callable[[], float] = time.perf_counter, sleep: Callable[[float], None] = time.sleep) -> None:
+                 clock: Callable[[], float] = time.perf_counter, sleep: Callable[[float], None] = time.sleep,
+                 cpu_clock: Callable[[], float] = time.thread_time) -> None:
         if not dt_s > 0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
         self.dt_s, self.config, self._clock, self._sleep = float(dt_s), config, clock, sleep
+        self._cpu_clock = cpu_clock  # this thread's CPU time, s (0.4 us a call here)
         self._due_s = math.inf
         self._late_k: list[int] = []
         #: an injected delay added to the work of the ticks it names (k -> s), for tests of the overrun path
@@ -88,9 +94,10 @@ class WallClockPacer:
         """Run ``runner`` to its end on the wall clock; returns :func:`deadline_stats` (also set as
         ``runner.log.deadline`` once the runner finishes)."""
         n = runner.n_ticks - runner.k
-        dt, clock, spin = self.dt_s, self._clock, self.config.spin_s
+        dt, clock, spin, cpu_clock = self.dt_s, self._clock, self.config.spin_s, self._cpu_clock
         start = np.zeros(n)
         end = np.zeros(n)
+        cpu = np.zeros(n)
         due0 = clock() + self.config.start_delay_s
         self._late_k = []
         k0 = runner.k
@@ -104,7 +111,9 @@ class WallClockPacer:
                 pass
             self._due_s = due
             start[i] = clock() - due
+            c0 = cpu_clock()
             runner.advance((k0 + i + 1) * dt)
+            cpu[i] = cpu_clock() - c0
             end[i] = clock() - due
             done = i + 1
             if runner.done:
@@ -113,8 +122,10 @@ class WallClockPacer:
         late = np.asarray(self._late_k, dtype=int) - k0
         stats = deadline_stats(start[:done], end[:done], dt, late, self.config.window_ticks, wall_s)
         self._due_s = math.inf
-        #: per tick of the last run: the work (us), how late it started (us), the ticks whose command was late
+        #: per tick of the last run: the work (us), the thread's CPU time in it (us), how late it started (us), the
+        #: ticks whose command was late
         self.exec_us = (end[:done] - start[:done]) * 1e6
+        self.cpu_us = cpu[:done] * 1e6
         self.jitter_us = start[:done] * 1e6
         self.late_ticks = late
         return stats

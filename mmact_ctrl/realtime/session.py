@@ -15,15 +15,14 @@ The episode's log carries the deadline statistics (``EpisodeLog.deadline``, ``mm
 
 from __future__ import annotations
 
-import gc
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 
 from mmact_ctrl.episode_log import EpisodeLog
 from mmact_ctrl.mpc_worker import InlineMPC, ProcessMPC
 from mmact_ctrl.realtime.async_source import AsyncQueries
+from mmact_ctrl.realtime.loop_thread import cpu_split, loop_thread
 from mmact_ctrl.realtime.pacer import PacerConfig, WallClockPacer
 from mmact_ctrl.runner import EpisodeRunner
 
@@ -74,7 +73,7 @@ class RealtimeSession:
         self.world, self.source, self.controller, self.config = world, source, controller, config
         if source.needs_image and not callable(getattr(world, "render_snapshot", None)):
             raise ValueError("a source that needs images in real time needs a world with snapshot/render_snapshot")
-        self.loop_cpus, self.worker_cpus = _cpu_split(config.loop_cpu)
+        self.loop_cpus, self.worker_cpus = cpu_split(config.loop_cpu)
         self.queries = AsyncQueries(develop=world.render_snapshot if source.needs_image else None,
                                     cpus=self.worker_cpus)
         self._inline = controller.mpc_worker
@@ -82,7 +81,8 @@ class RealtimeSession:
             mpc_cfg = controller.config.mpc
             controller.use_mpc_worker(ProcessMPC(mpc_cfg, controller.model.home_q_rad))
         self._closed = False
-        self.priority_refused = ""
+        with loop_thread(config.fifo_priority, no_gc=False) as thread:  # known before the first episode
+            self.priority_refused = thread.priority_refused
         self.warm_up()
         self._pin_workers()
 
@@ -111,44 +111,18 @@ class RealtimeSession:
         pacer = WallClockPacer(self.controller.config.dt_s, self.config.pacer)
         runner = EpisodeRunner(self.world, self.source, self.controller, seed, sensor=sensor,
                                async_queries=self.queries, deadline=pacer, record=record)
-        old = sys.getswitchinterval()
-        sys.setswitchinterval(self.config.switch_interval_s)
-        restore_priority = self._raise_priority()
-        old_cpus = os.sched_getaffinity(0) if self.loop_cpus else None
-        if self.loop_cpus:
-            os.sched_setaffinity(0, self.loop_cpus)
-        gc_was = gc.isenabled()
-        if self.config.no_gc:
-            gc.collect()
-            gc.disable()
         try:
-            stats = pacer.run(runner)
+            with loop_thread(self.config.fifo_priority, self.loop_cpus, self.config.switch_interval_s,
+                             self.config.no_gc) as thread:
+                self.priority_refused = thread.priority_refused
+                stats = pacer.run(runner)
         finally:
-            if gc_was:
-                gc.enable()
-            restore_priority()
-            if old_cpus:
-                os.sched_setaffinity(0, old_cpus)
-            sys.setswitchinterval(old)
             self._drain()
         log = runner.finish()
         log.deadline = stats
         log.rt_exec_us, log.rt_jitter_us, log.rt_late_ticks = pacer.exec_us, pacer.jitter_us, pacer.late_ticks
+        log.rt_cpu_us = pacer.cpu_us
         return log
-
-    def _raise_priority(self):
-        """SCHED_FIFO for this thread (``config.fifo_priority``); returns the function that restores it."""
-        self.priority_refused = ""
-        prio = self.config.fifo_priority
-        if prio <= 0 or not hasattr(os, "sched_setscheduler"):
-            return lambda: None
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-        except OSError as exc:
-            self.priority_refused = f"SCHED_FIFO {prio} refused: {exc}"
-            return lambda: None
-        return lambda: os.sched_setscheduler(0, policy, param)
 
     def _drain(self) -> None:
         """Wait for a query still in flight (its answer belongs to the episode that ended: dropped)."""
@@ -174,16 +148,6 @@ class RealtimeSession:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _cpu_split(loop_cpu: int | None) -> tuple[set[int], set[int]]:
-    """(the loop's CPUs, the workers' CPUs) of this process's allowed set (both empty: no pinning)."""
-    if loop_cpu is None or not hasattr(os, "sched_getaffinity"):
-        return set(), set()
-    allowed = os.sched_getaffinity(0)
-    if len(allowed) < 2 or loop_cpu not in allowed:
-        return set(), set()
-    return {loop_cpu}, allowed - {loop_cpu}
 
 
 def pin_process(pid: int, cpus: set[int]) -> None:
