@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 24's figures (about 25 min, most of it in real time: run it on an idle machine).
+# Issue 24's figures (about 35 min, most of it in real time: run it on an idle machine).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export MUJOCO_GL=egl PYTHONUNBUFFERED=1
@@ -29,4 +29,8 @@ python -m scenarios.realtime_check --rt-priority $PRIO --episodes 10 --out $OUT/
 
 # 4. the tick in simulated time, the MPC off the path
 python -m mmact_ctrl.bench --json $OUT/bench.json > $OUT/bench.txt
+
+# 5. the host: the same pacer around a fixed CPU work and nothing of ours, interleaved with the stack (about 10 min)
+bash $OUT/host/run.sh $OUT/host
+python $OUT/host/summary.py $OUT/host > $OUT/host/summary.txt
 echo done
