@@ -180,6 +180,7 @@ class EpisodeRunner:
         self._state = None
         self._after_us = 0.0  # this tick's work that real time does after the command (fusion, the MPC update), us
         self._deferred_measurements: list = []  # real time: arrived this tick, fused once the command is out
+        self._asked_at_k = -1  # real time: the tick that last handed a query to the worker
         self._wall_s = 0.0
         self._finished: EpisodeLog | None = None
         self.record = bool(record)
@@ -242,7 +243,7 @@ class EpisodeRunner:
                 self._fuse(arrived)
                 self._after_us = (time.perf_counter() - tick0) * 1e6
             else:
-                self._deferred_measurements = arrived
+                self._deferred_measurements.extend(arrived)
         if self.async_queries is not None:
             self._collect(t)
         self.earlier.tick(t, self.next_plan_s, self.replan_period_s)
@@ -275,7 +276,9 @@ class EpisodeRunner:
         if self.deadline is None:
             return self.controller.end_tick()
         a0 = time.perf_counter()
-        if self._deferred_measurements:
+        # a tick that built an observation for the source has had its share of work: its measurements wait a tick
+        # (the filter fuses each at its capture time, so only when the estimate has them moves, by 1 ms)
+        if self._deferred_measurements and self._asked_at_k != self.k - 1:
             arrived, self._deferred_measurements = self._deferred_measurements, []
             self._fuse(arrived)
         admitted = self._admit_due(t + self.dt_s)
@@ -328,6 +331,7 @@ class EpisodeRunner:
         ctx = QueryContext(t_s=t, latency_s=aq.latency_estimate_s(self.latency_s), scheduled=scheduled)
         executor, source = self.executor, self.source
         aq.submit(lambda o: executor.request(source, o, ctx), obs, snaps)
+        self._asked_at_k = k
         self._inflight = (t, self.next_plan_s)
         self.next_plan_s = math.inf
 

@@ -86,6 +86,43 @@ def test_with_a_deadline_measurements_are_fused_after_the_command(world):
     assert log.abort is None and int(np.count_nonzero(log.safety_mask)) == 0
 
 
+def test_a_tick_that_asks_the_source_leaves_its_measurements_to_the_next_tick(world):
+    """Real time with the source in its worker: the tick that builds an observation defers the fusion of what arrived
+    to the next tick's after-command work (the filter fuses each at its capture time); nothing is dropped."""
+    from mmact_ctrl.realtime.async_source import AsyncQueries
+
+    controller = HybridController(StackConfig(mode="hybrid", duration_s=1.5))
+    controller.use_mpc_worker(DeferringMPC(controller.mpc, controller))
+    events: list = []
+    _trace(controller, events)
+    queries = AsyncQueries()
+    submit = queries.submit
+
+    def traced_submit(*args):
+        events.append(("ask", max((e[1] for e in events if e[0] == "tick"), default=-1) + 1))  # the tick asking
+        return submit(*args)
+
+    queries.submit = traced_submit
+    runner = EpisodeRunner(world, make_expert(lead="velocity", world=world), controller, 3, deadline=OnTime(),
+                           async_queries=queries)
+    try:
+        runner.advance()
+    finally:
+        queries.close()
+    log = runner.finish()
+    asked = [e[1] for e in events if e[0] == "ask"]
+    assert len(asked) >= 2
+    deferred = 0
+    for k in asked:
+        i, j = events.index(("tick", k)), events.index(("tick", k + 1))
+        assert not any(e[0] == "fuse" for e in events[i:j])  # nothing fused after the asking tick's command
+        deferred += sum(e[0] == "fuse" and e[1] <= k for e in events[j:j + 6])  # fused after the next one's
+    assert deferred >= 1  # a query tick had measurements, and they were fused a tick later
+    fused = sum(e[0] == "fuse" for e in events)
+    assert fused == log.measurements >= 100  # 100 Hz for 1.5 s, none dropped
+    assert log.abort is None and int(np.count_nonzero(log.safety_mask)) == 0
+
+
 def test_without_one_measurements_are_fused_before_the_command(world):
     _, _, events = _episode(world, None)
     fused = [i for i, e in enumerate(events) if e[0] == "fuse"]
