@@ -240,7 +240,8 @@ def _late_ticks(log: EpisodeLog) -> list[dict]:
         return float(series[k]) if series is not None and 0 <= k < len(series) else None
 
     return [{"k": int(k), "start_late_us": at(log.rt_jitter_us, int(k)), "work_us": at(log.rt_exec_us, int(k)),
-             "cpu_us": at(log.rt_cpu_us, int(k)), "command_path_us": at(log.tick_us, int(k)), "after_us": at(log.after_us, int(k))}
+             "cpu_us": at(log.rt_cpu_us, int(k)), "command_path_us": at(log.tick_us, int(k)),
+             "after_us": at(log.after_us, int(k))}
             for k in np.asarray(late, dtype=int)[:MAX_LATE_TICKS]]
 
 

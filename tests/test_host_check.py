@@ -37,8 +37,11 @@ def test_calibration_scales_with_the_work_asked_for():
     assert small >= 1 and 5 <= large / small <= 20  # 10x the work, about 10x the iterations
 
 
-@pytest.mark.parametrize("argv, flag", [(["--work-us", "-3"], "--work-us"), (["--episodes", "0"], "--episodes"),
-                                        (["--duration-s", "0"], "--duration-s"), (["--rt-priority", "120"], "--rt-priority")])
+BAD = [(["--work-us", "-3"], "--work-us"), (["--episodes", "0"], "--episodes"), (["--duration-s", "0"], "--duration-s"),
+       (["--rt-priority", "120"], "--rt-priority")]
+
+
+@pytest.mark.parametrize("argv, flag", BAD)
 def test_bad_arguments_are_one_line_naming_the_switch(argv, flag, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)

@@ -169,7 +169,8 @@ def format_summary(result: dict) -> str:
         f"CPU work a tick, nothing else in the loop",
         f"  tick work median / p99 / p99.9 / max [us]   {s['work_us']['median']:.0f} / {s['work_us']['p99']:.0f} / "
         f"{s['work_us']['p999']:.0f} / {s['work_us']['max']:.0f}",
-        f"  ticks over {c['slow_factor']:g}x the median                  {s['slow_ticks']} ({100 * s['slow_tick_rate']:.2f} %)"
+        f"  ticks over {c['slow_factor']:g}x the median                  {s['slow_ticks']} "
+        f"({100 * s['slow_tick_rate']:.2f} %)"
         + (f", CPU time / wall time {ratio:.2f}{cause}" if ratio is not None else ""),
         f"  overruns                                    {s['overruns']} ({100 * s['overrun_rate']:.3f} %), cycles "
         f"missed {s['cycles_missed']}",
@@ -187,7 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     d = HostCheckConfig()
     p.add_argument("--work-us", type=float, default=d.work_us, help=f"CPU work per tick, us (default {d.work_us:g})")
     p.add_argument("--episodes", type=int, default=d.episodes, help=f"episodes (default {d.episodes})")
-    p.add_argument("--duration-s", type=float, default=d.duration_s, help=f"episode length, s (default {d.duration_s:g})")
+    p.add_argument("--duration-s", type=float, default=d.duration_s,
+                   help=f"episode length, s (default {d.duration_s:g})")
     p.add_argument("--rt-priority", type=int, default=d.fifo_priority,
                    help=f"SCHED_FIFO priority of the loop's thread, 0: normal scheduling (default {d.fifo_priority})")
     p.add_argument("--json", metavar="PATH", help="write the summary and per-episode statistics here")
