@@ -180,7 +180,6 @@ class EpisodeRunner:
         self._state = None
         self._after_us = 0.0  # this tick's work that real time does after the command (fusion, the MPC update), us
         self._deferred_measurements: list = []  # real time: arrived this tick, fused once the command is out
-        self._asked_at_k = -1  # real time: the tick that last handed a query to the worker
         self._wall_s = 0.0
         self._finished: EpisodeLog | None = None
         self.record = bool(record)
@@ -278,7 +277,8 @@ class EpisodeRunner:
         a0 = time.perf_counter()
         # a tick that built an observation for the source has had its share of work: its measurements wait a tick
         # (the filter fuses each at its capture time, so only when the estimate has them moves, by 1 ms)
-        if self._deferred_measurements and self._asked_at_k != self.k - 1:
+        asked_now = self._inflight is not None and self._inflight[0] == t  # this tick handed the worker a query
+        if self._deferred_measurements and not asked_now:
             arrived, self._deferred_measurements = self._deferred_measurements, []
             self._fuse(arrived)
         admitted = self._admit_due(t + self.dt_s)
@@ -331,7 +331,6 @@ class EpisodeRunner:
         ctx = QueryContext(t_s=t, latency_s=aq.latency_estimate_s(self.latency_s), scheduled=scheduled)
         executor, source = self.executor, self.source
         aq.submit(lambda o: executor.request(source, o, ctx), obs, snaps)
-        self._asked_at_k = k
         self._inflight = (t, self.next_plan_s)
         self.next_plan_s = math.inf
 

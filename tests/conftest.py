@@ -52,3 +52,20 @@ def _first_query_aims(source, seeds, per_query=None):
 def first_query_aims():
     """:func:`_first_query_aims`: the shared loop of the shipped checkpoints' aim tests."""
     return _first_query_aims
+
+
+def _one_line_exit_2(code, stderr: str, *needles: str) -> None:
+    """A command's answer to bad input: exit status 2 and one line on stderr (no traceback) that names each of
+    ``needles``."""
+    assert code == 2, stderr
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, stderr
+    assert "Traceback" not in stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+@pytest.fixture
+def one_line_exit_2():
+    """:func:`_one_line_exit_2`: the shared check of the command lines' one-line errors."""
+    return _one_line_exit_2

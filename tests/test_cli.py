@@ -32,30 +32,21 @@ BAD = [
 ]
 
 
-def _one_clear_line(stderr: str, name: str) -> None:
-    lines = [ln for ln in stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1, stderr
-    assert "error" in lines[0] and name in lines[0]
-    assert "Traceback" not in stderr
-
-
-def test_the_command_itself_gives_one_line_and_exit_2():
+def test_the_command_itself_gives_one_line_and_exit_2(one_line_exit_2):
     """The real entry point (``python -m``, imports and all) writes one line to stderr and exits 2."""
     argv, name = BAD[0]
     proc = subprocess.run([sys.executable, "-m", "scenarios.moving_target", *argv, "--quiet"],
                           capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2
-    _one_clear_line(proc.stderr, name)
+    one_line_exit_2(proc.returncode, proc.stderr, "error", name)
 
 
 @pytest.mark.parametrize("argv,name", BAD)
-def test_bad_values_give_one_clear_line(argv, name, capsys):
+def test_bad_values_give_one_clear_line(argv, name, capsys, one_line_exit_2):
     """Every bad value, through the command's ``main`` in this process (the entry point's own test is above: a
     process each cost 6 s of imports here)."""
     with pytest.raises(SystemExit) as exc:
         main([*argv, "--quiet"])
-    assert exc.value.code == 2
-    _one_clear_line(capsys.readouterr().err, name)
+    one_line_exit_2(exc.value.code, capsys.readouterr().err, "error", name)
 
 
 def test_json_and_plot_outputs(tmp_path, capsys):

@@ -24,13 +24,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from mmact_ctrl.config import StackConfig
 from mmact_ctrl.realtime.loop_thread import cpu_split, loop_thread
 from mmact_ctrl.realtime.pacer import PacerConfig, WallClockPacer
 
 PROG = "python -m mmact_ctrl.realtime.host_check"
 
-#: the robot aborts after this many late commands in a row (libfranka), as ``StackConfig.abort_after_missed_ticks``
-ABORT_AFTER = 20
+#: the robot aborts after this many late commands in a row (libfranka), as the episode runner does
+ABORT_AFTER = StackConfig().abort_after_missed_ticks
 
 
 @dataclass(frozen=True)
