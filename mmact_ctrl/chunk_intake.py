@@ -22,7 +22,8 @@ when it is due (:meth:`ChunkIntake.admit`)
                        ``HybridController.splice_distance_m``): a jump the robot should not be asked to make.
 
 A rejected chunk leaves the previous chunk running. ``rejections`` counts each reason; ``events`` keeps
-``(t_s, reason, detail)`` for the report.
+``(t_s, reason, detail)`` for the report; ``source_errors`` keeps the source's own words whole (a policy server's
+error text: openpi sends its traceback), once per distinct text, with how often and when first.
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.reference import ChunkReference
+
+#: distinct error texts kept per episode (each whole)
+MAX_ERROR_TEXTS = 10
 
 REJECT_REASONS: tuple[str, ...] = ("source_raised", "not_a_chunk", "bad_shape", "nonfinite", "bad_time", "bad_tokens",
                                    "stale", "out_of_order", "splice")
@@ -91,6 +95,7 @@ class ChunkIntake:
         self.pending: list[Pending] = []
         self.rejections: dict[str, int] = {r: 0 for r in REJECT_REASONS}
         self.events: list[tuple[float, str, str]] = []
+        self.source_errors: list[dict] = []
         self.silent_calls = 0
         self._seq = 0
 
@@ -102,6 +107,18 @@ class ChunkIntake:
         self.rejections[reason] += 1
         self.events.append((float(t_s), reason, detail[:200]))
 
+    def _keep_error(self, t_s: float, exc: Exception) -> None:
+        """Keep what the source said: its whole text (``exc.text``, a server's error frame) or the exception."""
+        line = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        text = getattr(exc, "text", None)
+        text = text if isinstance(text, str) and text.strip() else f"{type(exc).__name__}: {exc}"
+        for e in self.source_errors:
+            if e["text"] == text:
+                e["count"] += 1
+                return
+        if len(self.source_errors) < MAX_ERROR_TEXTS:
+            self.source_errors.append({"t_s": float(t_s), "count": 1, "line": line, "text": text})
+
     def request(self, call, observation: Observation) -> ActionChunk | None:
         """``call()`` (the source's plan or plan_inpaint), checked: the chunk, or None (nothing arrived or
         rejected: counted)."""
@@ -110,6 +127,7 @@ class ChunkIntake:
             chunk = call()
         except Exception as exc:  # noqa: BLE001 - any failure of the source is survived here
             self._reject(t, "source_raised", f"{type(exc).__name__}: {exc}")
+            self._keep_error(t, exc)
             return None
         if chunk is None:
             self.silent_calls += 1

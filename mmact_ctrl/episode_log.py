@@ -17,7 +17,8 @@ class EpisodeLog:
     bitmask, ``torque_rate_max_nm_s`` the largest torque rate sent. Faults survived: ``rejections`` chunks
     rejected per reason (``mmact_ctrl.chunk_intake``), ``watchdog_stops``, ``gated_measurements`` (per gate),
     ``missed_ticks``; ``abort`` is ``{"t_s", "reason"}`` when the robot would have aborted the motion.
-    ``events`` lists ``(t_s, what, detail)`` of every fault handled. ``change_times_s``: when the target's motion
+    ``events`` lists ``(t_s, what, detail)`` of every fault handled; ``source_errors`` what the source said when it
+    failed (``{"t_s", "count", "line", "text"}`` per distinct text, the text whole: a policy server's traceback). ``change_times_s``: when the target's motion
     changed course (``World.target_change_times_s``); ``delay_steps``: per activated chunk, the waypoints of the
     running chunk consumed while it was computed (activation time minus observation time, in chunk steps: the
     inference delay d of RTC, as it actually ran); ``mpc_solve_us``: the wall time of each MPC solve, us (beside the
@@ -84,6 +85,7 @@ class EpisodeLog:
     rt_late_ticks: np.ndarray | None = None
     abort: dict | None = None
     events: list[tuple[float, str, str]] = field(default_factory=list)
+    source_errors: list[dict] = field(default_factory=list)
 
     def truncate(self, n: int) -> None:
         """Keep the first ``n`` samples (an aborted episode)."""

@@ -196,6 +196,8 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "d_measured": float(np.median(log.delay_steps)) if log.delay_steps else float("nan"),
         "d_steps": [float(x) for x in log.delay_steps],
         **_realtime_episode(log),
+        # what the source said when it failed (whole); only when it did, so other episodes' figures are unchanged
+        **({"source_errors": [dict(e) for e in log.source_errors]} if log.source_errors else {}),
     }
 
 

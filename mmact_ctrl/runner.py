@@ -467,6 +467,7 @@ class EpisodeRunner:
         log.safety_counts = self.monitor.counts
         log.torque_rate_max_nm_s = self.monitor.torque_rate_max_nm_s
         log.rejections = dict(self.intake.rejections)
+        log.source_errors = [dict(e) for e in self.intake.source_errors]
         log.events = sorted(log.events + self.intake.events)
         log.watchdog_stops = controller.watchdog_stops
         f = controller.filter

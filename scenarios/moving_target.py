@@ -37,7 +37,8 @@ from mmact_ctrl.sources.contract import require_capabilities
 from scenarios.world.factory import POLICY_PLANE_Z_M, make_world
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.cli import number as _number
-from scenarios.sources import build_source, close_source, scene_settings, settings_from_args, source_spec_arg
+from scenarios.sources import (build_source, close_source, connect_check, scene_settings, settings_from_args,
+                               source_spec_arg)
 
 PROG = "python -m scenarios.moving_target"
 DEFAULT_SOURCE = "policy"
@@ -49,15 +50,32 @@ MAX_SPEED_M_S = 1.7
 MAX_REPLAN_HZ = 100.0
 
 
-def _refine_bins(text: str) -> int | None:
-    """``auto`` -> None (the checkpoint's matched window), else an integer >= 0."""
-    return None if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
+def _refine_bins(text: str):
+    """``auto`` (the checkpoint's matched window), else an integer >= 0."""
+    return "auto" if text == "auto" else _number(int, "--refine-bins (an integer >= 0 or auto)", 0)(text)
 
 
 def _plane(text: str):
     if text.strip().lower() == "auto":
         return "auto"
     return _number(float, "--plane-z-m", 0, True, 0.6)(text)
+
+
+def _scale(text: str) -> tuple[float, ...]:
+    """``--action-scale``: one number > 0 or a comma-separated list of them."""
+    parse = _number(float, "--action-scale (numbers > 0, comma-separated)", 0, False)
+    return tuple(parse(t.strip()) for t in text.split(","))
+
+
+def _clip(text: str):
+    """``--action-clip``: ``LO,HI`` with LO < HI, or ``none``."""
+    if text.strip().lower() == "none":
+        return "none"
+    parts = text.split(",")
+    parse = _number(float, "--action-clip (LO,HI or none)")
+    if len(parts) != 2 or not parse(parts[0]) < parse(parts[1]):
+        raise argparse.ArgumentTypeError(f"--action-clip must be LO,HI with LO < HI, or none, got {text!r}")
+    return parse(parts[0]), parse(parts[1])
 
 
 def _latency(text: str):
@@ -99,26 +117,51 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
                      help="a keyword setting for a module:factory source (repeatable; VALUE is read as JSON when it "
                           "parses, else as a string)")
+    src.add_argument("--preset", metavar="NAME|PATH", default=None,
+                     help="ws:// source: the convention its policy was trained in, in one switch: libero (openpi's "
+                          "LIBERO client: 224 px frames upright, 8-D state, each row one 20 Hz step of robosuite's "
+                          "OSC, normalised to [-1, 1] x 0.05 m / 0.5 rad, gripper -1 open / +1 closed), droid (joint "
+                          "velocities x 0.2 rad per 15 Hz step, gripper 1 = closed), mmact (ours), or a JSON preset "
+                          "file (README, 'Conventions'). Each piece's own switch below overrides it. Default: what the "
+                          "server declares; a foreign server that declares nothing needs it (or every piece)")
     src.add_argument("--obs-mapping", metavar="NAME|PATH", default=None,
-                     help="ws:// source: which observation keys carry images, state and prompt: mmact (ours), libero, "
-                          "droid, or a JSON mapping file (default: what the server declares, else mmact)")
+                     help="ws:// source: which observation keys carry images, state and prompt: libero, droid, mmact "
+                          "(ours: it carries the true target, which no real robot has), or a JSON mapping file; "
+                          "overrides the preset's")
     src.add_argument("--action-space", choices=ACTION_KINDS, default=None,
-                     help="ws:// source: what the server's actions are (default: what it declares, else tcp_pose)")
+                     help="ws:// source: the kind of its actions (overrides the preset's)")
     src.add_argument("--gripper", choices=GRIPPERS, default=None,
-                     help="ws:// source: the gripper convention of its actions' last value (default: what it declares, "
-                          "else width_m)")
-    src.add_argument("--expert-lead", choices=LEADS, default="velocity",
+                     help="ws:// source: the convention of its actions' last value: width_m (m), open_1 (1 = open), "
+                          "close_1 (1 = closed: DROID), sign (-1 open, +1 closed: LIBERO), none (overrides the preset's)")
+    src.add_argument("--delta-from", choices=("observation", "previous"), default=None,
+                     help="ws:// source with tcp_delta / joint_delta actions: observation = every row is a delta from "
+                          "the observed pose; previous = rows are successive steps, each from the one before (LIBERO's "
+                          "and DROID's); overrides the preset's")
+    src.add_argument("--action-rotation", choices=("nominal", "world"), default=None,
+                     help="ws:// source with tcp_pose actions: world = an absolute world-frame axis-angle; nominal = "
+                          "ours, relative to the hand pointing down (overrides the preset's)")
+    src.add_argument("--action-scale", type=_scale, default=None, metavar="S[,S...]",
+                     help="ws:// source: what one unit of each arm dimension is, m or rad (one value, or one per arm "
+                          "dimension: 6 for TCP actions, 7 for joints); the gripper value is not scaled (overrides the "
+                          "preset's; libero: 0.05,0.05,0.05,0.5,0.5,0.5; droid: 0.2)")
+    src.add_argument("--action-clip", type=_clip, default=None, metavar="LO,HI|none",
+                     help="ws:// source: clip every action value to [LO, HI] before scaling, as the trained controller "
+                          "did (none: no clipping; overrides the preset's)")
+    src.add_argument("--image-rotation", type=int, choices=(0, 180), default=None,
+                     help="ws:// source: turn our frames (they come out upright) by this many degrees before sending "
+                          "(180: what robosuite's raw renders look like); overrides the preset's (0)")
+    src.add_argument("--expert-lead", choices=LEADS, default=None,
                      help="expert: velocity = it sees two frames (t0 - 0.1 s and t0), estimates the target's velocity and "
                           "aims each waypoint where the target will be at that waypoint's time (latency included); "
                           "none = it aims where the target is in the frame at t0 (a single-frame policy). Default: velocity")
     src.add_argument("--checkpoint", metavar="PATH", default=None,
                      help="policy checkpoint (default: the shipped policy/checkpoints/mmact_small.pt)")
-    src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=1,
-                     help="policy: decoding passes per chunk (1 = the whole chunk in one forward pass)")
-    src.add_argument("--refine-bins", type=_refine_bins, default="auto",
+    src.add_argument("--action-steps", type=_number(int, "--action-steps", 1), default=None,
+                     help="policy: decoding passes per chunk (default 1: the whole chunk in one forward pass)")
+    src.add_argument("--refine-bins", type=_refine_bins, default=None,
                      help="policy: 0 = each action token's bin centre; W > 0 = the probability-weighted mean bin "
                           "within +-W bins of the greedy token (sub-bin detokenizing from the same forward pass); "
-                          "auto = the window matched to the checkpoint's Gaussian training labels (4 std: 64)")
+                          "auto (default) = the window matched to the checkpoint's Gaussian training labels (4 std: 64)")
     g = p.add_argument_group("execution")
     g.add_argument("--mode", nargs="+", choices=MODES, default=["open_loop", "hybrid"],
                    help="open_loop: dequantized waypoints interpolated and tracked by the QP, nothing else; "
@@ -160,15 +203,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "executed is rejected and counted; the previous chunk keeps running")
     g.add_argument("--bins", type=_number(int, "--bins", 0), default=2048,
                    help="action bins per dimension of the tokenizer (0 = no quantization)")
-    g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=16, help="expert: waypoints per chunk (H)")
+    g.add_argument("--horizon", type=_number(int, "--horizon", 1), default=None,
+                   help="expert: waypoints per chunk (H, default 16); a ws:// server decides its own")
     g.add_argument("--chunk-dt-s", type=_number(float, "--chunk-dt-s", 0, False), default=None,
-                   help="expert (and a ws:// server that does not declare it): waypoint spacing, s (default 0.1)")
+                   help="expert: waypoint spacing, s (default 0.1); ws:// source: the server's waypoint spacing, "
+                        "overriding its preset's")
     w = p.add_argument_group("world")
     w.add_argument("--target", choices=TARGET_KINDS, default="linear", help="how the target moves")
     w.add_argument("--plane-z-m", type=_plane, default="auto",
                    help="objects at this height (+ up to 2 cm) moving horizontally, as in the policy's training scenes; "
                         f"0 = the full 3-D workspace; auto = the checkpoint's training plane with --source policy ({POLICY_PLANE_Z_M} "
-                        "for the shipped one), 0 with --source expert")
+                        "for the shipped one), the scene a server of ours declares, else 0 (--source expert, a "
+                        "module:factory source or a foreign ws:// server: the full 3-D workspace)")
     w.add_argument("--objects", type=int, choices=(1, 2), default=None,
                    help="objects in the scene (two differently coloured balls: the instruction names one; default: "
                         "the source's scene, else 2)")
@@ -355,8 +401,10 @@ def realtime_source_args(args: argparse.Namespace):
 
     _, workers = cpu_split(0)
     served = ServedSource(serve_argv(settings), cpus=workers)
+    # the served source declares itself: none of its own switches apply to the URL
     remote = argparse.Namespace(**{**vars(args), "source": served.url, "checkpoint": None, "source_arg": [],
-                                   "action_steps": 1, "refine_bins": None})
+                                   "action_steps": None, "refine_bins": None, "expert_lead": None, "horizon": None,
+                                   "chunk_dt_s": None})
     return remote, served
 
 
@@ -396,6 +444,7 @@ def run(args: argparse.Namespace) -> dict:
         source, world = make_source_and_world(source_args)
         stack.callback(world.close)
         stack.callback(close_source, source)
+        connect = _connect(args, source, world)
         # a mode that needs what the source cannot do (inpainting): one line now, not a silent episode later
         for mode in configs:
             require_capabilities(source, make_executor(mode).needs, mode)
@@ -417,6 +466,7 @@ def run(args: argparse.Namespace) -> dict:
                     afters.append(log.after_us)
                     if i == 0:
                         first_logs[mode] = log
+                    _say_source_errors(bar, mode, i, args.seed + i, m, bool(args.json))
                     bar.set_postfix(mode=mode, success=f"{np.mean([e['success'] for e in episodes]):.0%}")
                     bar.update(1)
             summary = summarize(episodes, np.concatenate(ticks), np.concatenate(afters))
@@ -430,13 +480,48 @@ def run(args: argparse.Namespace) -> dict:
                    "target_spec": dataclasses.asdict(world.target), "objects": int(world.n_objects),
                    "cameras": list(world.scene.camera_names),
                    "refine_bins_used": getattr(source, "refine_bins", None),
-                   "source_url": getattr(source, "name", args.source) if args.realtime else args.source},
+                   "source_url": getattr(source, "name", args.source) if args.realtime else args.source,
+                   **({"connect": connect.to_dict()} if connect is not None else {})},
         "summary": runs[last]["summary"],
         "episodes": runs[last]["episodes"],
         "runs": runs,
     }
     payload["_logs"] = first_logs
+    payload["_connect"] = connect
     return payload
+
+
+def _connect(args: argparse.Namespace, source, world):
+    """A policy server's connect check (``scenarios.sources.connect_check``), its block printed; None otherwise."""
+    measured = args.realtime or args.latency_ms == "measured"
+    report = connect_check(source, world, args.seed, args.replan_hz, None if measured else args.latency_ms / 1e3,
+                           "measured: the first call's round trip" if measured else "--latency-ms")
+    if report is not None:
+        print("\n".join(report.lines()), flush=True)
+    return report
+
+
+def _say_source_errors(bar, mode: str, i: int, seed: int, m: dict, in_json: bool) -> None:
+    """Once per episode: the first line of what the source said when it failed (the whole text is in the JSON)."""
+    errors = m.get("source_errors")
+    if not errors:
+        return
+    n = sum(e["count"] for e in errors)
+    more = f" (+{len(errors) - 1} other error text{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    where = "; the whole text is in the JSON (episodes[].source_errors)" if in_json else ""
+    bar.write(f"{mode} episode {i + 1} (seed {seed}): the source failed {n} time{'s' if n != 1 else ''}: "
+              f"{errors[0]['line']}{more}{where}", file=sys.stderr)
+
+
+def _watchdog_note(payload: dict, connect) -> None:
+    """Why the arm braked, when the connect check knows: the chunks ran out before the next arrived."""
+    stops = sum(e.get("watchdog_stops", 0) for r in payload["runs"].values() for e in r["episodes"])
+    cov = connect.coverage if connect is not None else None
+    if stops and cov is not None and not cov.covers:
+        fix = (f"--replan-hz {cov.suggested_replan_hz:g} covers them" if cov.suggested_replan_hz is not None
+               else "no replan rate covers them")
+        print(f"\nnote: {stops} watchdog stop(s): each chunk ({cov.chunk_s:g} s) ran out before the next was active "
+              f"(replan every {cov.period_s:g} s + latency {cov.latency_s * 1e3:.0f} ms); {fix}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -450,6 +535,7 @@ def main(argv: list[str] | None = None) -> int:
         # bad configuration, a missing or unreadable checkpoint, a server that is down: one clear line
         parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     logs = payload.pop("_logs")
+    connect = payload.pop("_connect")
     # a static target has no speed: printing --speed's default next to it read as if it moved
     target_desc = "static target" if args.target == "static" else f"{args.target} target at {args.speed:g} m/s"
     latency = args.latency_ms if args.latency_ms == "measured" else f"{args.latency_ms:g}"
@@ -463,11 +549,12 @@ def main(argv: list[str] | None = None) -> int:
             run_desc = run_desc.replace(f"{args.source} source", f"{args.source} source (served at {payload['config']['source_url']})")
     if args.source == "policy" and not args.realtime:  # our policy in this process (in real time: served)
         w = payload["config"]["refine_bins_used"]
-        passes = "one pass" if args.action_steps == 1 else f"{args.action_steps} passes"
+        passes = "one pass" if (args.action_steps or 1) == 1 else f"{args.action_steps} passes"
         run_desc += f" (policy: {passes}, {'refine +-' + str(w) + ' bins' if w else 'bin centres'})"
     print(f"\n{run_desc}, {args.episodes} episodes x {args.duration_s:g} s per mode "
           f"({time.perf_counter() - t0:.1f} s wall)\n")
     print(format_table({m: r["summary"] for m, r in payload["runs"].items()}))
+    _watchdog_note(payload, connect)
     if args.json:
         write_json(args.json, payload)
         print(f"\nwrote {args.json}")

@@ -3,6 +3,12 @@
     python -m scenarios.serve --source policy --port 8000              # the shipped token policy
     python -m scenarios.serve --source expert --expert-lead velocity   # the scripted expert
     python -m scenarios.serve --source my_pkg.my_module:make_source --source-arg horizon=10
+    python -m scenarios.serve --source expert --preset libero           # the expert speaking LIBERO's convention
+
+With ``--preset`` the source speaks that convention instead of ours (``mmact_ctrl.sources.openpi.preset_serving``):
+it reads the convention's observation keys and answers its actions (LIBERO: successive normalised OSC steps at
+20 Hz; DROID: normalised joint velocities at 15 Hz), and declares only its ``action_horizon`` and the privileged keys
+it reads (the expert reads the true target): a client must say ``--preset`` itself, as with any foreign server.
 
 Any openpi client (``openpi_client.websocket_client_policy.WebsocketClientPolicy``) can then drive it, and our stack
 can run it from another process (``mmact_ctrl.sources.openpi.RemoteSource``). The observation travels in the
@@ -31,6 +37,7 @@ EPILOG = f"""examples:
   {PROG} --source expert --expert-lead none --horizon 10 --chunk-dt-s 0.05
   {PROG} --source my_pkg.sources:make_source --source-arg horizon=10 --source-arg lead=none
   {PROG} --source expert --host 0.0.0.0 --port 8000      # reachable from other machines
+  {PROG} --source expert --preset droid --infer-delay-ms 150   # a DROID-speaking stand-in for a 150 ms model
 
 check it:  curl http://127.0.0.1:8000/healthz   (answers OK)
 """
@@ -91,6 +98,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="objects at this height (m), 0 = the full 3-D workspace (the expert's lead reflects at the "
                         "walls of this workspace)")
     w.add_argument("--objects", type=int, choices=(1, 2), default=2, help="objects in the scene")
+    c = p.add_argument_group("convention")
+    c.add_argument("--preset", metavar="NAME|PATH", default=None,
+                   help="expert or module:factory: speak this convention instead of ours (libero, droid, or a JSON "
+                        "preset file): its observation keys, its actions, its spacing (the expert's --chunk-dt-s and "
+                        "--horizon default to the preset's); the expert checks that each frame of a scene camera is "
+                        "upright, as a policy of the convention was trained to see it, and refuses it otherwise")
+    c.add_argument("--infer-delay-ms", type=_number(float, "--infer-delay-ms", 0, True, 60000.0), default=0.0,
+                   help="answer each request this long after it arrived at the earliest (a stand-in for a slower "
+                        "model), ms")
     n = p.add_argument_group("network")
     n.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every interface)")
@@ -106,6 +122,9 @@ def _check_switches(parser: argparse.ArgumentParser, args: argparse.Namespace) -
             parser.error(f"{flag} applies to --source {only} only (got --source {args.source})")
     if args.source_arg and kind != "module:factory":
         parser.error(f"--source-arg applies to --source module.path:factory only (got --source {args.source})")
+    if args.preset is not None and kind == "policy":
+        parser.error("--preset applies to --source expert or module:factory: the policy reads its own cameras at its "
+                     "own size (serve it in our convention)")
 
 
 def _refine_bins(text: str | None) -> int | None:
@@ -137,8 +156,14 @@ def make_served_source(args: argparse.Namespace):
         world = make_world("linear", plane_z_m=args.plane_z_m, n_objects=args.objects)  # for its workspace box
         try:
             lead = args.expert_lead or "velocity"
-            source = make_expert(bins=2048 if args.bins is None else args.bins, horizon=args.horizon or 16,
-                                 dt_s=args.chunk_dt_s or 0.1, lead=lead, world=world)
+            conv = _preset(args)
+            dt_s = args.chunk_dt_s or (conv.action.dt_s if conv is not None else 0.1)
+            if conv is not None and abs(dt_s - conv.action.dt_s) > 1e-9:
+                raise ValueError(f"--chunk-dt-s {dt_s:g} is not the {conv.name} preset's spacing "
+                                 f"({conv.action.dt_s:g} s): leave it out")
+            horizon = args.horizon or (conv.horizon if conv is not None and conv.horizon else 16)
+            source = make_expert(bins=2048 if args.bins is None else args.bins, horizon=horizon, dt_s=dt_s, lead=lead,
+                                 world=world)
         finally:
             world.close()
         cfg = source.config
@@ -150,8 +175,65 @@ def make_served_source(args: argparse.Namespace):
     return source, dict(getattr(source, "scene", None) or scene), f"{args.source}"
 
 
-def banner(url: str, policy: SourcePolicy, what: str) -> str:
+def _preset(args: argparse.Namespace):
+    """The convention of ``--preset`` (None without it)."""
+    if args.preset is None:
+        return None
+    from mmact_ctrl.sources.presets import load_preset
+
+    try:
+        return load_preset(args.preset)
+    except ValueError as exc:
+        raise ValueError(f"--preset: {exc}") from None
+
+
+def make_policy(args: argparse.Namespace, source, scene: dict):
+    """The openpi policy that serves ``source``: in our convention, or in ``--preset``'s."""
+    conv = _preset(args)
+    if conv is None:
+        return SourcePolicy(check_source(source, f"--source {args.source}"), scene=scene,
+                            infer_delay_ms=args.infer_delay_ms)
+    from mmact_ctrl.sources.openpi.mapping import PRIVILEGED_PARTS
+    from mmact_ctrl.sources.openpi.preset_serving import ConventionPolicy
+
+    check_source(source, f"--source {args.source}")
+    expert = args.source == "expert"
+    return ConventionPolicy(source, conv, privileged=PRIVILEGED_PARTS if expert else (),
+                            infer_delay_ms=args.infer_delay_ms, frame_check=_frame_checks(conv, scene) if expert else None)
+
+
+def _frame_checks(conv, scene: dict):
+    """The expert's eye: every image key of a scene camera must be upright (``scenarios.world.frame_check``)."""
+    from scenarios.world.factory import make_world
+    from scenarios.world.frame_check import UprightCheck
+
+    keys = [k for k in getattr(conv.mapping, "images", ()) if k.camera in ("front", "top", "side")]
+    if not keys:
+        return None
+    world = make_world("static", n_objects=int(scene.get("n_objects", 2)), cameras=tuple({k.camera for k in keys}))
+    try:
+        checks = [UprightCheck(world.model, k.camera, k.key, int(scene.get("n_objects", 2))) for k in keys]
+    finally:
+        world.close()
+
+    def check(obs: dict, observation) -> None:
+        for c in checks:
+            c(obs, observation)
+
+    return check
+
+
+def banner(url: str, policy, what: str) -> str:
     """What is served, where, and what its metadata declares."""
+    health = url.replace("ws://", "http://", 1) + "/healthz"
+    if not isinstance(policy, SourcePolicy):
+        conv = policy.convention
+        return "\n".join([
+            f"serving {what} at {url}   (health: {health})",
+            f"  convention: {conv.name} (a client must say --preset {conv.name}: it is not declared); "
+            f"{conv.mapping.describe()}",
+            f"  actions: {conv.action.describe()}; metadata: {policy.metadata}",
+            "  Ctrl-C stops."])
     m = policy.metadata["mmact"]
     space = m["action_space"]
     if m["needs_image"]:
@@ -163,7 +245,6 @@ def banner(url: str, policy: SourcePolicy, what: str) -> str:
         frames = "no images"
     tok = m["action_token_range"]
     scene = m["scene"] or {}
-    health = url.replace("ws://", "http://", 1) + "/healthz"
     return "\n".join([
         f"serving {what} at {url}   (health: {health})",
         f"  actions: {space['kind']} ({space['gripper']}), {m['chunk_dt_s']:g} s apart; observation: mmact keys, {frames}",
@@ -180,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_switches(parser, args)
     try:
         source, scene, what = make_served_source(args)
-        policy = SourcePolicy(check_source(source, f"--source {args.source}"), scene=scene)
+        policy = make_policy(args, source, scene)
         server = PolicyServer(policy, host=args.host, port=int(args.port))
     except (ValueError, FileNotFoundError, RuntimeError) as exc:  # a bad checkpoint, factory or setting: one line
         parser.error(str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__)

@@ -198,9 +198,9 @@ def test_inpainting_is_offered_only_when_the_server_declares_it(expert):
 
 
 def test_remote_source_refuses_what_contradicts_the_server(expert_server):
-    with pytest.raises(SourceError, match="declares the action space"):
+    with pytest.raises(SourceError, match="declares action-space tcp_pose; --action-space joint_pos contradicts it"):
         RemoteSource(expert_server.url, action_space=ActionSpace("joint_pos", "none", 0.1), config=FAST)
-    with pytest.raises(SourceError, match="does not apply"):
+    with pytest.raises(SourceError, match="declares obs-mapping 'mmact'.*--obs-mapping 'libero' contradicts it"):
         RemoteSource(expert_server.url, mapping="libero", config=FAST)
 
 
@@ -423,9 +423,9 @@ def test_a_restarted_server_serving_another_source_is_refused(expert):
 
 def test_foreign_server_needs_a_mapping_and_an_action_space(scripted):
     _, handle = scripted
-    with pytest.raises(SourceError, match="observation mapping"):
+    with pytest.raises(SourceError, match="no conventions.*also need --obs-mapping"):
         RemoteSource(handle.url, action_space=ActionSpace(), config=FAST)
-    with pytest.raises(SourceError, match="action space"):
+    with pytest.raises(SourceError, match="no conventions.*--obs-mapping also needs --action-space --gripper --chunk-dt-s"):
         RemoteSource(handle.url, mapping=STATE_ONLY, config=FAST)
 
 

@@ -19,6 +19,11 @@ Spaces (``ActionSpace.kind``), each optionally followed by one gripper value (``
 ``joint_delta``  joint displacements (7, rad) relative to the joints at the observation (or accumulated,
                  ``delta_from="previous"``), then forward kinematics.
 
+Normalised actions (``ActionSpace.clip``, ``ActionSpace.scale``): a policy trained on actions in [-1, 1] declares
+``clip=(-1, 1)`` (every value, the gripper's too, is clipped to it first, as robosuite's controllers and openpi's
+DROID client do) and ``scale`` (what one unit of an arm dimension is: robosuite's OSC_POSE maps 1 to 0.05 m and
+0.5 rad per step, DROID's joint velocity to 0.2 rad per step); the gripper value is never scaled.
+
 Gripper conventions (``ActionSpace.gripper``): ``width_m`` (opening in m, 0 .. 0.08, ours), ``open_1`` (1 = open,
 0 = closed), ``close_1`` (1 = closed, 0 = open: DROID's ``gripper_position``), ``sign`` (-1 = open, +1 = closed:
 LIBERO), ``none`` (no gripper value: the gripper stays open).
@@ -57,6 +62,9 @@ class ActionSpace:
             ``world`` (absolute orientation as a world-frame rotation vector).
         delta_from: ``tcp_delta`` / ``joint_delta``: ``observation`` (every waypoint relative to the observed
             pose) or ``previous`` (each relative to the one before: deltas accumulate).
+        scale: what one unit of each arm dimension is (m or rad; one value for all, or one per arm dimension),
+            applied after ``clip``; None: the actions are in m / rad already.
+        clip: ``(low, high)``: every action value is clipped to it before anything else (None: no clipping).
     """
 
     kind: str = "tcp_pose"
@@ -64,6 +72,8 @@ class ActionSpace:
     dt_s: float = 0.1
     rotation: str = "nominal"
     delta_from: str = "observation"
+    scale: tuple[float, ...] | None = None
+    clip: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -76,25 +86,53 @@ class ActionSpace:
             raise ValueError(f"action space rotation must be 'nominal' or 'world', got {self.rotation!r}")
         if self.delta_from not in ("observation", "previous"):
             raise ValueError(f"action space delta_from must be 'observation' or 'previous', got {self.delta_from!r}")
+        if self.scale is not None:
+            scale = tuple(float(v) for v in np.atleast_1d(np.asarray(self.scale, dtype=np.float64)))
+            if len(scale) not in (1, self.arm_dims) or not all(math.isfinite(v) and v > 0 for v in scale):
+                raise ValueError(f"action space scale must be one finite number > 0 or {self.arm_dims} of them (one per "
+                                 f"arm dimension of {self.kind}), got {self.scale!r}")
+            object.__setattr__(self, "scale", scale)
+        if self.clip is not None:
+            clip = tuple(float(v) for v in np.asarray(self.clip, dtype=np.float64).reshape(-1))
+            if len(clip) != 2 or not all(math.isfinite(v) for v in clip) or not clip[0] < clip[1]:
+                raise ValueError(f"action space clip must be (low, high) with low < high, got {self.clip!r}")
+            object.__setattr__(self, "clip", clip)
+
+    @property
+    def arm_dims(self) -> int:
+        """Arm dimensions (6 for the TCP spaces, 7 for the joint spaces), before the gripper value."""
+        return 6 if self.kind.startswith("tcp") else 7
 
     @property
     def dims(self) -> int:
         """Action dimensions D a chunk of this space has."""
-        return (6 if self.kind.startswith("tcp") else 7) + (self.gripper != "none")
+        return self.arm_dims + (self.gripper != "none")
+
+    @property
+    def scale_vector(self) -> np.ndarray:
+        """The scale of each arm dimension (ones without a scale)."""
+        return np.broadcast_to(np.asarray(self.scale if self.scale is not None else (1.0,), dtype=np.float64),
+                               (self.arm_dims,)).copy()
 
     @property
     def is_native(self) -> bool:
         """Whether actions are already our task-space chunk (no conversion but the checks)."""
-        return self.kind == "tcp_pose" and self.rotation == "nominal" and self.gripper == "width_m"
+        return (self.kind == "tcp_pose" and self.rotation == "nominal" and self.gripper == "width_m"
+                and self.scale is None and self.clip is None)
 
     def describe(self) -> str:
         extra = {"tcp_pose": f", rotation {self.rotation}", "tcp_delta": f", from {self.delta_from}",
                  "joint_delta": f", from {self.delta_from}"}.get(self.kind, "")
+        if self.clip is not None:
+            extra += f", clipped to [{self.clip[0]:g}, {self.clip[1]:g}]"
+        if self.scale is not None:
+            extra += f", scale {'/'.join(f'{v:g}' for v in self.scale)}"
         return f"{self.kind} ({self.dims} dims, gripper {self.gripper}{extra}, dt {self.dt_s:g} s)"
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "gripper": self.gripper, "dt_s": float(self.dt_s), "rotation": self.rotation,
-                "delta_from": self.delta_from}
+                "delta_from": self.delta_from, "scale": None if self.scale is None else list(self.scale),
+                "clip": None if self.clip is None else list(self.clip)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ActionSpace":
@@ -174,6 +212,18 @@ class ActionAdapter:
             raise ValueError(f"actions contain NaN or inf (first at waypoint {bad})")
         return a
 
+    def physical(self, actions) -> np.ndarray:
+        """``actions`` checked, clipped to ``space.clip`` and their arm dimensions multiplied by ``space.scale``: the
+        values in m / rad (and the gripper value in its convention)."""
+        a = self._checked(actions)
+        sp = self.space
+        if sp.clip is None and sp.scale is None:
+            return a
+        a = np.clip(a, sp.clip[0], sp.clip[1]) if sp.clip is not None else a.copy()
+        if sp.scale is not None:
+            a[:, :sp.arm_dims] *= sp.scale_vector
+        return a
+
     def _rotvec_of(self, rot: np.ndarray) -> np.ndarray:
         return rotvec_from_rot(rot, self._rot_nominal)
 
@@ -187,7 +237,9 @@ class ActionAdapter:
 
     def pose(self, actions, observation: Observation) -> np.ndarray:
         """The TCP poses ``(H, 6)`` (position m, rotation vector relative to the nominal grasp) of ``actions``."""
-        a = self._checked(actions)
+        return self._pose(self.physical(actions), observation)
+
+    def _pose(self, a: np.ndarray, observation: Observation) -> np.ndarray:
         sp = self.space
         if sp.kind == "tcp_pose":
             if sp.rotation == "nominal":
@@ -221,9 +273,9 @@ class ActionAdapter:
                  info: dict | None = None) -> ActionChunk:
         """The task-space chunk of ``actions`` answered to ``observation`` (raises ``ValueError`` naming the shape or
         the bad value for actions that do not fit the space: the loop counts it as a rejected chunk)."""
-        a = self._checked(actions)
+        a = self.physical(actions)
         w = np.empty((len(a), 7))
-        w[:, :6] = self.pose(a, observation)
+        w[:, :6] = self._pose(a, observation)
         w[:, 6] = gripper_width_m(a[:, -1] if self.space.gripper != "none" else np.zeros(len(a)), self.space.gripper)
         meta = {"action_space": self.space.kind}
         if info:

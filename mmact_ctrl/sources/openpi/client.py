@@ -255,9 +255,7 @@ class PolicyClient:
         except OSError as exc:
             raise ConnectionLost(f"the connection to the policy server at {self.url} failed: {exc}") from None
         if isinstance(reply, str):
-            lines = len(reply.strip().splitlines())
-            raise ServerError(f"the policy server at {self.url} failed: {_error_line(reply)} ({lines}-line error "
-                              "text in .text)", reply)
+            raise ServerError(f"the policy server at {self.url} failed: {_error_line(reply)}", reply)
         try:
             out = codec.unpackb(reply)
         except ValueError as exc:

@@ -9,13 +9,8 @@ Presets (:data:`PRESETS`, :func:`load_mapping`):
             ``mmact/gripper_m``, ``mmact/target_pos_m``, ``mmact/target_prev_pos_m`` (absent when None),
             ``mmact/frame_gap_s``, ``mmact/image/<camera>`` and ``mmact/prev_image/<camera>`` (H, W, 3) uint8 per
             camera as rendered (absent when None), ``prompt`` (the instruction);
-``libero``  ``observation/image`` (the ``front`` camera) and ``observation/wrist_image`` (camera ``wrist``: our
-            scene has none, so it is a black frame), both 224 x 224 x 3 uint8; ``observation/state`` (8,):
-            TCP position (m), TCP orientation as a world-frame axis-angle (rad), the two finger positions
-            (+w/2, -w/2 m, robosuite's ``gripper_qpos``); ``prompt``;
-``droid``   ``observation/exterior_image_1_left`` (``front``) and ``observation/wrist_image_left`` (``wrist``: black),
-            224 x 224 x 3 uint8; ``observation/joint_position`` (7,) rad; ``observation/gripper_position`` (1,),
-            0 = open, 1 = closed; ``prompt``.
+``libero``, ``droid``  the observation keys of those conventions (``mmact_ctrl.sources.presets``: each preset's file
+            says what its keys hold and where that was read).
 
 A user mapping is a JSON file (:func:`load_mapping` with its path) with this schema (every field but ``images`` /
 ``state`` optional; unknown fields are refused)::
@@ -26,7 +21,8 @@ A user mapping is a JSON file (:func:`load_mapping` with its path) with this sch
         {"key": "observation/image",       # the key in the observation dict
          "camera": "front",                # a scene camera (front, top, side), or null: a black frame
          "size_px": 224,                   # the side of a square frame, or [height, width]
-         "previous": false}                # true: the frame prev_frame_gap_s before the observation
+         "previous": false,                # true: the frame prev_frame_gap_s before the observation
+         "rotate_deg": 0}                  # 0: as rendered (ours are upright); 180: turned upside down
       ],
       "state": [                           # one entry per state key: a float vector of the named parts
         {"key": "observation/state",
@@ -40,9 +36,16 @@ A user mapping is a JSON file (:func:`load_mapping` with its path) with this sch
 
 State parts (:data:`STATE_PARTS`, with their sizes): ``t0_s`` (1, s), ``q_rad`` (7), ``dq_rad_s`` (7), ``ee_pos_m``
 (3, world frame), ``ee_rotvec_rad`` (3, ours: relative to the nominal grasp), ``ee_axis_angle_rad`` (3, the TCP
-orientation as a world-frame rotation vector), ``gripper_m`` (1, opening), ``gripper_fingers_m`` (2, +w/2 and -w/2),
-``gripper_open_1`` (1, 1 = open), ``gripper_close_1`` (1, 1 = closed), ``target_pos_m`` (3),
-``target_prev_pos_m`` (3, the current position before there is an earlier frame), ``frame_gap_s`` (1).
+orientation as a world-frame axis-angle, continuous: the quaternion in the nominal grasp's hemisphere, angle in
+[0, 2 pi] as robosuite's ``quat2axisangle``, :func:`controllers.rotations.axis_angle_in_hemisphere`), ``gripper_m``
+(1, opening), ``gripper_fingers_m`` (2, +w/2 and -w/2), ``gripper_open_1`` (1, 1 = open), ``gripper_close_1`` (1,
+1 = closed), ``target_pos_m`` (3), ``target_prev_pos_m`` (3, the current position before there is an earlier frame),
+``frame_gap_s`` (1).
+
+**Privileged parts** (:data:`PRIVILEGED_PARTS`: the true target, which a simulator knows and no real robot does):
+a key mapping sends them only as ``mmact/<part>`` keys listed in ``KeyMapping.privileged``, which the client fills
+only for a server of ours that asks for them in its metadata (``mmact_ctrl.sources.presets.resolve``), or when the
+user put them in a mapping file or chose the ``mmact`` mapping; the connect block names them.
 
 A mapping declares the scene cameras it needs (``camera_names``: the world must render these, in that order) and the
 size to render them at (``image_size_px``). A camera the scene does not have (:data:`SCENE_CAMERAS`) fills its key
@@ -58,7 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.rotations import rot_from_rotvec, rotvec_from_rot
+from controllers.rotations import axis_angle_in_hemisphere, reference_quat, rot_from_rotvec
 from mmact_ctrl.chunk import Observation
 
 #: the cameras of the simulated scene (``scenarios.world.panda_scene.AVAILABLE_CAMERAS``; a test holds them equal)
@@ -71,6 +74,8 @@ STATE_PARTS: dict[str, int] = {
     "gripper_m": 1, "gripper_fingers_m": 2, "gripper_open_1": 1, "gripper_close_1": 1, "target_pos_m": 3,
     "target_prev_pos_m": 3, "frame_gap_s": 1,
 }
+#: what a simulator knows and a real robot does not: sent only where asked for (see the module)
+PRIVILEGED_PARTS: tuple[str, ...] = ("target_pos_m", "target_prev_pos_m", "frame_gap_s")
 #: the prompt key of every preset (openpi's)
 PROMPT_KEY = "prompt"
 #: our extension: the known prefix (n, 7) of an inpainting request (task-space waypoints)
@@ -121,12 +126,15 @@ class ImageKey:
         camera: the scene camera, or None for a black frame.
         size_hw: (height, width) px of the frame sent.
         previous: the frame ``prev_frame_gap_s`` before the observation instead of the current one.
+        rotate_deg: 0 (the frame as rendered: ours come out upright) or 180 (turned upside down, as robosuite's
+            raw renders are).
     """
 
     key: str
     camera: str | None
     size_hw: tuple[int, int] = (224, 224)
     previous: bool = False
+    rotate_deg: int = 0
 
     def __post_init__(self) -> None:
         if not isinstance(self.key, str) or not self.key:
@@ -135,6 +143,8 @@ class ImageKey:
             raise ValueError(f"image key {self.key!r}: camera must be a camera name or null, got {self.camera!r}")
         object.__setattr__(self, "size_hw", _size_hw(tuple(self.size_hw) if isinstance(self.size_hw, list)
                                                      else self.size_hw, f"image key {self.key!r}"))
+        if self.rotate_deg not in (0, 180) or isinstance(self.rotate_deg, bool):
+            raise ValueError(f"image key {self.key!r}: rotate_deg must be 0 or 180, got {self.rotate_deg!r}")
 
 
 @dataclass(frozen=True)
@@ -170,7 +180,7 @@ def state_part(observation: Observation, part: str, rot_nominal: np.ndarray) -> 
         return np.array([o.t0_s], dtype=np.float64)
     if part == "ee_axis_angle_rad":
         rot = rot_from_rotvec(np.asarray(o.ee_rotvec_rad, dtype=np.float64), rot_nominal)
-        return rotvec_from_rot(rot, np.eye(3))
+        return axis_angle_in_hemisphere(rot, reference_quat(rot_nominal))
     if part == "gripper_m":
         return np.array([g])
     if part == "gripper_fingers_m":
@@ -215,6 +225,8 @@ class KeyMapping:
         prompt: a fixed prompt instead of ``Observation.instruction`` (None: the instruction).
         prev_frame_gap_s: how long before the observation the ``previous`` frames are taken, s.
         scene_cameras: the cameras the scene has (others are black frames).
+        privileged: :data:`PRIVILEGED_PARTS` also sent, each as ``mmact/<part>`` (float64): only for a server of
+            ours that asked for them (see the module).
     """
 
     name: str
@@ -224,11 +236,16 @@ class KeyMapping:
     prompt: str | None = None
     prev_frame_gap_s: float = 0.0
     scene_cameras: tuple[str, ...] = SCENE_CAMERAS
+    privileged: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "images", tuple(self.images))
         object.__setattr__(self, "state", tuple(self.state))
         object.__setattr__(self, "scene_cameras", tuple(self.scene_cameras))
+        object.__setattr__(self, "privileged", tuple(self.privileged))
+        bad = [p for p in self.privileged if p not in PRIVILEGED_PARTS]
+        if bad:
+            raise ValueError(f"observation mapping {self.name!r}: privileged part(s) {bad} are not of {PRIVILEGED_PARTS}")
         keys = [k.key for k in self.images] + [k.key for k in self.state] + ([self.prompt_key] if self.prompt_key else [])
         dup = sorted({k for k in keys if keys.count(k) > 1})
         if dup:
@@ -259,6 +276,13 @@ class KeyMapping:
         return bool(self.camera_names)
 
     @property
+    def privileged_keys(self) -> tuple[str, ...]:
+        """Every key that carries what no real robot knows: state keys with a privileged part, and the
+        ``mmact/<part>`` keys of :attr:`privileged`."""
+        keys = [k.key for k in self.state if any(p in PRIVILEGED_PARTS for p in k.parts)]
+        return tuple(keys + [f"mmact/{p}" for p in self.privileged])
+
+    @property
     def image_size_px(self) -> int | None:
         """The side to render the scene cameras at: the largest side any of their keys asks for (None: none)."""
         sides = [max(k.size_hw) for k in self.images if k.camera in self.scene_cameras]
@@ -266,8 +290,11 @@ class KeyMapping:
 
     def describe(self) -> str:
         parts = [f"{k.key} <- {k.camera if k.camera in self.scene_cameras else 'black'} "
-                 f"{k.size_hw[0]}x{k.size_hw[1]}{' (previous)' if k.previous else ''}" for k in self.images]
-        parts += [f"{k.key} <- {'+'.join(k.parts)} ({k.size})" for k in self.state]
+                 f"{k.size_hw[0]}x{k.size_hw[1]}{' (previous)' if k.previous else ''}"
+                 f"{' rotated 180' if k.rotate_deg == 180 and k.camera in self.scene_cameras else ''}"
+                 for k in self.images]
+        parts += [f"{k.key} <- {'+'.join(k.parts)} ({k.size}, {k.dtype})" for k in self.state]
+        parts += [f"mmact/{p} <- {p} (privileged)" for p in self.privileged]
         if self.prompt_key:
             parts.append(f"{self.prompt_key} <- {'fixed text' if self.prompt is not None else 'instruction'}")
         note = (f"; the scene has no camera {', '.join(map(repr, self.missing_cameras))}: black frame(s)"
@@ -282,7 +309,8 @@ class KeyMapping:
         for k in self.images:
             if k.camera in self.scene_cameras:
                 views = _views(observation, cams, k.previous, self.name)
-                out[k.key] = np.ascontiguousarray(resize_bilinear(views[cams.index(k.camera)], k.size_hw))
+                frame = resize_bilinear(views[cams.index(k.camera)], k.size_hw)
+                out[k.key] = np.ascontiguousarray(frame[::-1, ::-1] if k.rotate_deg == 180 else frame)
             else:
                 out[k.key] = np.zeros((*k.size_hw, 3), dtype=np.uint8)
         for k in self.state:
@@ -291,6 +319,9 @@ class KeyMapping:
                                  "grasp orientation")
             vec = np.concatenate([state_part(observation, p, rot_nominal) for p in k.parts])
             out[k.key] = vec.astype(k.dtype)
+        for p in self.privileged:
+            value = state_part(observation, p, rot_nominal)
+            out[f"mmact/{p}"] = float(value[0]) if p in _SCALARS else value
         if self.prompt_key:
             out[self.prompt_key] = self.prompt if self.prompt is not None else str(observation.instruction)
         return out
@@ -298,8 +329,8 @@ class KeyMapping:
     def to_dict(self) -> dict:
         """The JSON form (the user mapping file's schema)."""
         return {"name": self.name,
-                "images": [{"key": k.key, "camera": k.camera, "size_px": list(k.size_hw), "previous": k.previous}
-                           for k in self.images],
+                "images": [{"key": k.key, "camera": k.camera, "size_px": list(k.size_hw), "previous": k.previous,
+                            "rotate_deg": k.rotate_deg} for k in self.images],
                 "state": [{"key": k.key, "parts": list(k.parts), "dtype": k.dtype} for k in self.state],
                 "prompt_key": self.prompt_key, "prompt": self.prompt, "prev_frame_gap_s": float(self.prev_frame_gap_s)}
 
@@ -315,9 +346,9 @@ class KeyMapping:
         name = d.get("name", name)
         images, state = [], []
         for i, e in enumerate(d.get("images") or []):
-            _fields(e, {"key", "camera", "size_px", "previous"}, f"{name!r} images[{i}]")
+            _fields(e, {"key", "camera", "size_px", "previous", "rotate_deg"}, f"{name!r} images[{i}]")
             images.append(ImageKey(e.get("key"), e.get("camera"), _size_hw(e.get("size_px", 224), f"{name!r} images[{i}]"),
-                                   bool(e.get("previous", False))))
+                                   bool(e.get("previous", False)), e.get("rotate_deg", 0)))
         for i, e in enumerate(d.get("state") or []):
             _fields(e, {"key", "parts", "dtype"}, f"{name!r} state[{i}]")
             parts = e.get("parts")
@@ -368,6 +399,13 @@ class MmactMapping:
     needs_image: bool = True
     name: str = field(default="mmact", init=False)
     missing_cameras: tuple[str, ...] = field(default=(), init=False)
+    #: the mmact keys carry the true target: every privileged part
+    privileged: tuple[str, ...] = field(default=PRIVILEGED_PARTS, init=False)
+
+    @property
+    def privileged_keys(self) -> tuple[str, ...]:
+        """The keys that carry what no real robot knows (the true target now and a frame earlier)."""
+        return tuple(f"mmact/{p}" for p in self.privileged)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "camera_names", tuple(self.camera_names))
@@ -446,18 +484,7 @@ class MmactMapping:
 
 ObsMapping = KeyMapping | MmactMapping
 
-LIBERO = KeyMapping(
-    name="libero",
-    images=(ImageKey("observation/image", "front", (224, 224)), ImageKey("observation/wrist_image", "wrist", (224, 224))),
-    state=(StateKey("observation/state", ("ee_pos_m", "ee_axis_angle_rad", "gripper_fingers_m")),),
-)
-DROID = KeyMapping(
-    name="droid",
-    images=(ImageKey("observation/exterior_image_1_left", "front", (224, 224)),
-            ImageKey("observation/wrist_image_left", "wrist", (224, 224))),
-    state=(StateKey("observation/joint_position", ("q_rad",)), StateKey("observation/gripper_position", ("gripper_close_1",))),
-)
-#: the named mappings
+#: the named mappings: each preset's (``mmact_ctrl.sources.presets``)
 PRESETS: tuple[str, ...] = ("mmact", "libero", "droid")
 
 
@@ -469,8 +496,10 @@ def load_mapping(spec: "str | Path | ObsMapping", scene_cameras: tuple[str, ...]
     text = str(spec)
     if text == "mmact":
         return MmactMapping()
-    if text in ("libero", "droid"):
-        return replace(LIBERO if text == "libero" else DROID, scene_cameras=tuple(scene_cameras))
+    if text in PRESETS:
+        from mmact_ctrl.sources.presets import PRESETS as CONVENTIONS
+
+        return replace(CONVENTIONS[text].mapping, scene_cameras=tuple(scene_cameras))
     path = Path(text)
     if not path.is_file():
         raise ValueError(f"unknown observation mapping {text!r}: give a preset ({', '.join(PRESETS)}) or the path of a "

@@ -9,10 +9,12 @@ our task-space ``ActionChunk``, whose ``info`` holds
 ``server_infer_ms``  the reply's ``server_timing.infer_ms`` (None when the server does not say);
 ``policy_infer_ms``  the reply's ``policy_timing.infer_ms`` (None when the policy does not say).
 
-A server of ours (``python -m scenarios.serve``) declares everything in its metadata (``"mmact"``, see
-:mod:`~mmact_ctrl.sources.openpi.serving`): the source then configures itself from it (the ``mmact`` mapping with
-the server source's cameras, its action space, capabilities, token range and scene). A foreign server declares
-nothing of this: the caller gives the mapping and the action space.
+Which keys to send and what the replies mean is the server's convention
+(:class:`~mmact_ctrl.sources.presets.Convention`), settled at connect from the server's metadata and the user's
+switches (:mod:`mmact_ctrl.sources.presets.resolve`): a server of ours declares everything in its metadata
+(``"mmact"``, see :mod:`~mmact_ctrl.sources.openpi.serving`); a foreign server is given a preset (``--preset
+libero``) or the pieces; neither is one line, before any episode. The true target (privileged keys) reaches only a
+server of ours that asks for it, or one the user chose the ``mmact`` keys for.
 
 Every failure of a call raises (the loop counts it as a rejected chunk and keeps the previous one running): the
 wire's own errors (:class:`~mmact_ctrl.sources.openpi.client.WireError`: timeout, lost connection, error frame) and
@@ -22,7 +24,6 @@ wire's own errors (:class:`~mmact_ctrl.sources.openpi.client.WireError`: timeout
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -30,8 +31,8 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.sources.action_space import ActionAdapter, ActionSpace
 from mmact_ctrl.sources.contract import CAPABILITIES, SourceError
 from mmact_ctrl.sources.openpi.client import ClientConfig, PolicyClient
-from mmact_ctrl.sources.openpi.mapping import (KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, SCENE_CAMERAS, TOKENS_KEY,
-                                               MmactMapping, ObsMapping, load_mapping)
+from mmact_ctrl.sources.openpi.mapping import KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, SCENE_CAMERAS, TOKENS_KEY, ObsMapping
+from mmact_ctrl.sources.presets.resolve import ConventionSwitches, Resolved, resolve
 
 
 def _mmact_metadata(metadata: dict) -> dict | None:
@@ -44,84 +45,56 @@ class RemoteSource:
 
     Args:
         url: ``ws://host:port``.
-        mapping: the observation mapping: a preset name (``mmact``, ``libero``, ``droid``), a JSON file path, or a
-            mapping object; None: from the server's metadata (a server of ours), else an error.
-        action_space: the server's action space (``ActionSpace`` or its dict); None: from the server's metadata.
+        switches: what the user said of the server's convention (``--preset`` and the pieces' switches).
         config: the client's timeouts and retries.
-        model: the robot model for joint-space actions (None: the Panda's).
+        model: the robot model for joint-space actions and the state's orientation (None: the Panda's).
         scene_cameras: the cameras the scene has (image keys of other cameras get black frames).
+        mapping: from Python: the observation mapping (a preset name, a JSON file, a mapping object): the same as
+            ``switches.obs_mapping``.
+        action_space: from Python: the whole action space (an ``ActionSpace`` or its dict): every action piece said.
 
     Raises:
         ServerUnreachable: the server cannot be reached (a ``SourceError``: one line naming the URL).
-        SourceError: the mapping or the action space is missing, contradicts the server's, or is malformed.
+        SourceError: no convention can be settled, or a switch contradicts the server (one line naming both).
     """
 
-    def __init__(self, url: str, mapping: "str | Path | ObsMapping | None" = None,
-                 action_space: "ActionSpace | dict | None" = None, config: ClientConfig = ClientConfig(), model=None,
-                 scene_cameras: tuple[str, ...] = SCENE_CAMERAS) -> None:
+    def __init__(self, url: str, switches: ConventionSwitches | None = None, config: ClientConfig = ClientConfig(),
+                 model=None, scene_cameras: tuple[str, ...] = SCENE_CAMERAS, *,
+                 mapping: "str | ObsMapping | None" = None, action_space: "ActionSpace | dict | None" = None) -> None:
         self.client = PolicyClient(url, config)
         try:
-            self._configure(mapping, action_space, model, tuple(scene_cameras))
+            switches = _fold(switches or ConventionSwitches(), mapping, action_space, self.client.url)
+            self.resolved: Resolved = resolve(self.client.metadata, switches, self.client.url, tuple(scene_cameras))
+            self._configure(model)
         except Exception:
             self.client.close()
             raise
 
     # ---- configuration ---------------------------------------------------------------------------------------
-    def _configure(self, mapping, action_space, model, scene_cameras) -> None:
-        url = self.name
-        if isinstance(action_space, dict):
-            action_space = _space_from_dict(action_space, f"the action space given for {url}")
+    def _configure(self, model) -> None:
+        conv = self.resolved.convention
         self._meta = _mmact_metadata(self.client.metadata)
+        meta = self._meta or {}
         self.action_token_range: tuple[int, int] | None = None
-        self.declared_capabilities: frozenset[str] = frozenset()
-        if self._meta is not None:
-            mapping, action_space = self._from_metadata(mapping, action_space)
-        else:
-            if mapping is None:
-                raise SourceError(f"the policy server at {url} does not declare its observation keys (no 'mmact' "
-                                  "metadata: a foreign server): give an observation mapping (mmact, libero, droid, "
-                                  "or a JSON mapping file)")
-            if action_space is None:
-                raise SourceError(f"the policy server at {url} does not declare its action space (a foreign server): "
-                                  "give one (kind, gripper convention, dt_s)")
-        if not isinstance(action_space, ActionSpace):
-            raise SourceError(f"the action space for {url} must be an ActionSpace or its dict, got {action_space!r}")
         try:
-            self.mapping = load_mapping(mapping, scene_cameras)
-        except ValueError as exc:
-            raise SourceError(str(exc)) from None
-        self.space = action_space
-        self.adapter = ActionAdapter(action_space, model)
-        self._rot_nominal = self.adapter.model.fk(self.adapter.model.home_q_rad)[1]
-
-    def _from_metadata(self, mapping, action_space):
-        meta, url = self._meta, self.name
-        declared = _space_from_dict(meta.get("action_space"), f"the action space the server at {url} declares")
-        if action_space is not None and action_space != declared:
-            raise SourceError(f"the policy server at {url} declares the action space {declared.describe()}, not "
-                              f"{action_space.describe()}: leave the action space out")
-        name = meta.get("obs_mapping", "mmact")
-        if name != "mmact":
-            raise SourceError(f"the policy server at {url} reads the observation mapping {name!r}, which this client "
-                              "does not know")
-        if mapping is not None and not (mapping == "mmact" or isinstance(mapping, MmactMapping)):
-            raise SourceError(f"the policy server at {url} is a server of ours and reads the 'mmact' observation keys: "
-                              f"the mapping {str(getattr(mapping, 'name', mapping))!r} does not apply (leave it out)")
-        try:
-            cams = tuple(str(c) for c in meta.get("camera_names") or ())
-            size = meta.get("image_size_px")
-            mapping = MmactMapping(camera_names=cams, image_size_px=None if size is None else int(size),
-                                   prev_frame_gap_s=float(meta.get("prev_frame_gap_s") or 0.0),
-                                   needs_image=bool(meta.get("needs_image", True)))
-            tok = meta.get("action_token_range")
+            tok = meta.get("action_token_range") if "action_space" in meta else None
             self.action_token_range = None if tok is None else (int(tok[0]), int(tok[1]))
         except (TypeError, ValueError, IndexError) as exc:
-            raise SourceError(f"the policy server at {url} sent malformed 'mmact' metadata: {exc}") from None
+            raise SourceError(f"the policy server at {self.name} sent malformed 'mmact' metadata: {exc}") from None
         caps = meta.get("capabilities") or ()
-        self.declared_capabilities = frozenset(str(c) for c in caps if str(c) in CAPABILITIES)
-        if isinstance(meta.get("scene"), dict):
-            self.scene = dict(meta["scene"])
-        return mapping, declared
+        self.declared_capabilities: frozenset[str] = frozenset(str(c) for c in caps if str(c) in CAPABILITIES)
+        if self.resolved.word.scene is not None:
+            self.scene = dict(self.resolved.word.scene)
+        self.mapping = conv.mapping
+        self.space = conv.action
+        self.adapter = ActionAdapter(conv.action, model)
+        self._rot_nominal = self.adapter.model.fk(self.adapter.model.home_q_rad)[1]
+        self.last_actions: np.ndarray | None = None
+
+    @property
+    def convention(self):
+        """The settled :class:`~mmact_ctrl.sources.presets.Convention`."""
+        return self.resolved.convention
 
     # ---- what the loop and the CLIs read ----------------------------------------------------------------------
     @property
@@ -160,6 +133,7 @@ class RemoteSource:
     def describe(self) -> str:
         """One line: the URL, who declared what, the mapping and the action space."""
         who = (f"server of ours ({self._meta.get('source', '?')})" if self._meta is not None else "foreign server")
+        who += f"; convention {self.convention.name}"
         caps = ", ".join(sorted(self.declared_capabilities)) or "none"
         return f"{self.name}: {who}; {self.mapping.describe()}; actions {self.space.describe()}; capabilities {caps}"
 
@@ -170,8 +144,9 @@ class RemoteSource:
     def close(self) -> None:
         self.client.close()
 
-    def plan(self, observation: Observation) -> ActionChunk:
-        return self._request(observation, None)
+    def plan(self, observation: Observation, timeout_s: float | None = None) -> ActionChunk:
+        """One chunk for ``observation`` (``timeout_s``: this call's limit; None: the client's request timeout)."""
+        return self._request(observation, None, timeout_s)
 
     def plan_inpaint(self, observation: Observation, known: np.ndarray) -> ActionChunk:
         """Real-time chunking over the wire (our extension): ``known`` (n, 7) travels as ``mmact/known_actions``;
@@ -180,16 +155,18 @@ class RemoteSource:
             raise SourceError(f"the policy server at {self.name} does not declare the inpaint capability")
         return self._request(observation, np.ascontiguousarray(known, dtype=np.float64).reshape(-1, 7))
 
-    def _request(self, observation: Observation, known: np.ndarray | None) -> ActionChunk:
+    def _request(self, observation: Observation, known: np.ndarray | None, timeout_s: float | None = None) -> ActionChunk:
         obs = self.mapping.encode(observation, self._rot_nominal)
         if known is not None:
             obs[KNOWN_ACTIONS_KEY] = known
-        reply = self.client.infer(obs)
+        self.last_actions = None
+        reply = self.client.infer(obs, timeout_s)
         self._check_same_server()
         call = self.client.calls[-1]
         if "actions" not in reply:
             raise ValueError(f"{self.name}: the reply has no 'actions' (keys: {sorted(map(str, reply))[:12]})")
         actions = np.asarray(reply["actions"])
+        self.last_actions = actions
         if actions.dtype.kind not in "biuf":
             raise ValueError(f"{self.name}: 'actions' must be numbers, got dtype {actions.dtype} shape {actions.shape}")
         tokens = reply.get(TOKENS_KEY) if self.action_token_range is not None else None
@@ -214,10 +191,18 @@ class RemoteSource:
                               "different source?): its chunks are refused")
 
 
-def _space_from_dict(d, what: str) -> ActionSpace:
-    if not isinstance(d, dict):
-        raise SourceError(f"{what} must be a dict of ActionSpace fields, got {d!r}")
-    try:
-        return ActionSpace.from_dict(d)
-    except (TypeError, ValueError) as exc:
-        raise SourceError(f"{what} is malformed: {exc}") from None
+def _fold(switches: ConventionSwitches, mapping, action_space, url: str) -> ConventionSwitches:
+    """``switches`` with the Python-side ``mapping`` / ``action_space`` arguments folded in."""
+    if isinstance(action_space, dict):
+        try:
+            action_space = ActionSpace.from_dict(action_space)
+        except (TypeError, ValueError) as exc:
+            raise SourceError(f"the action space given for {url} is malformed: {exc}") from None
+    if action_space is not None and not isinstance(action_space, ActionSpace):
+        raise SourceError(f"the action space for {url} must be an ActionSpace or its dict, got {action_space!r}")
+    if action_space is not None:
+        pieces = ConventionSwitches.from_space(action_space)
+        switches = replace(switches, **{p: getattr(pieces, p) for p in pieces.given()})
+    if mapping is not None:
+        switches = replace(switches, obs_mapping=mapping)
+    return switches

@@ -81,10 +81,12 @@ class SourcePolicy:
     Args:
         source: the chunk source (its ``plan`` returns our task-space ``ActionChunk``).
         scene: the ``make_world`` settings it was made for (``plane_z_m``, ``n_objects``), for the metadata.
+        infer_delay_ms: each answer takes at least this long (a stand-in for a slower model), ms.
     """
 
-    def __init__(self, source, scene: dict | None = None) -> None:
+    def __init__(self, source, scene: dict | None = None, infer_delay_ms: float = 0.0) -> None:
         self.source = source
+        self.infer_delay_s = float(infer_delay_ms) / 1e3
         self.metadata = source_metadata(source, scene)
         m = self.metadata["mmact"]
         self.mapping = MmactMapping(camera_names=tuple(m["camera_names"]), image_size_px=m["image_size_px"],
@@ -113,6 +115,9 @@ class SourcePolicy:
             chunk = self.source.plan_inpaint(observation, known)
         else:
             chunk = self.source.plan(observation)
+        wait = self.infer_delay_s - (time.perf_counter() - t0)
+        if wait > 0:
+            time.sleep(wait)
         infer_ms = (time.perf_counter() - t0) * 1e3
         if not isinstance(chunk, ActionChunk):
             raise TypeError(f"source {self.name!r} returned {type(chunk).__name__}, not an ActionChunk")
