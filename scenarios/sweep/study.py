@@ -149,7 +149,8 @@ def cell_key(cell: dict, duration_s: float) -> str:
                        **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
                           if cell.get("source", "expert") != "expert" else {}),
-                       **({"source_args": cell["source_args"]} if cell.get("source_args") else {})}, sort_keys=True)
+                       **({"source_args": cell["source_args"]} if cell.get("source_args") else {}),
+                       **({"preset": cell["preset"]} if cell.get("preset") else {})}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -172,10 +173,11 @@ def _source_and_world(cell: dict):
             _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
         world = _CACHE[wkey]
         return make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=world), world
-    skey = ("source", spec, json.dumps(cell.get("source_args") or {}, sort_keys=True), cell.get("checkpoint"))
+    skey = ("source", spec, json.dumps(cell.get("source_args") or {}, sort_keys=True), cell.get("checkpoint"),
+            cell.get("preset"))
     if skey not in _CACHE:
         _CACHE[skey] = build_source(SourceSettings(spec=spec, args=dict(cell.get("source_args") or {}),
-                                                   checkpoint=cell.get("checkpoint") or None))
+                                                   checkpoint=cell.get("checkpoint") or None, preset=cell.get("preset")))
     source = _CACHE[skey]
     wkey = ("world", cell["target"], cell["speed_m_s"], skey)
     if wkey not in _CACHE:  # the source's scenes (our policy's: two balls, its cameras and training plane)
@@ -292,6 +294,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword setting for a module:factory source (repeatable; VALUE read as JSON when it parses)")
     p.add_argument("--checkpoint", default=None, help="policy checkpoint (default: the shipped one)")
+    p.add_argument("--preset", metavar="NAME|PATH", default=None,
+                   help="ws:// source: the convention its policy was trained in (libero, droid, mmact, or a JSON preset "
+                        "file: README 'Conventions'); default: what the server declares")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     if args.seeds < 1 or args.workers < 1:
@@ -352,7 +357,8 @@ def main(argv: list[str] | None = None) -> int:
             if c["study"] == "bins":
                 continue
             c = {**c, "source": args.source, "checkpoint": ckpt, "lead": "-",
-                 **({"source_args": settings.args} if settings.args else {})}
+                 **({"source_args": settings.args} if settings.args else {}),
+                 **({"preset": settings.preset} if settings.preset else {})}
             key = cell_key(c, duration_s) + c["study"]
             if key not in seen:
                 seen.add(key)
