@@ -11,11 +11,10 @@ from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
 from controllers.target_estimator import EstimatorConfig
 
-from mmact_ctrl.executors.registry import EXECUTORS
+from mmact_ctrl.executors.registry import MODES, check_mode
 
-#: the built-in ways of executing chunks (``mmact_ctrl.executors``), baselines first, ours last.
-MODES: tuple[str, ...] = tuple(EXECUTORS)
-#: modes that execute chunks without our control layer (the baselines from the field).
+#: the built-in ways of executing chunks (``mmact_ctrl.executors.registry.MODES``: baselines first, ours last); the
+#: modes that execute chunks without our control layer (the baselines from the field):
 BASELINE_MODES: tuple[str, ...] = tuple(m for m in MODES if m != "hybrid")
 
 
@@ -102,8 +101,7 @@ class StackConfig:
     mpc: MPCConfig = field(default_factory=MPCConfig)
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        check_mode(self.mode)
         if not self.replan_hz > 0:
             raise ValueError(f"replan_hz must be > 0, got {self.replan_hz}")
         if not self.latency_ms >= 0:

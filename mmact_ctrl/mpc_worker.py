@@ -102,12 +102,11 @@ class ProcessMPC:
         config: the MPC's configuration (the process builds its own, ~0.3 s, plus the imports).
         q_nominal_rad: the posture its null-space term pulls toward.
         max_solve_ms: the lateness bound (default ``config.max_solve_ms``).
-    """
 
-    #: the controller sends each problem once the tick's command is out (``HybridController.end_tick``): the process
-    #: then solves while the loop sleeps, not while it computes (measured here: a solve running beside the tick's
-    #: own work made that work 1.5-2x slower)
-    defer_submit = True
+    In real time the runner's deadline order (``mmact_ctrl.tick_order.DeadlineOrder``) hands each problem over once
+    the tick's command is out: the process then solves while the loop sleeps, not while it computes (measured here: a
+    solve running beside the tick's own work made that work 1.5-2x slower).
+    """
 
     def __init__(self, config, q_nominal_rad, max_solve_ms: float | None = None,
                  clock: Callable[[], float] = time.perf_counter) -> None:

@@ -136,17 +136,6 @@ class OnTime:
         return False
 
 
-def _deferring_mpc(controller):
-    """The inline MPC solver, handed its problems after the command as real time's MPC process is
-    (``ProcessMPC.defer_submit``), solving at once: deterministic."""
-    from mmact_ctrl.mpc_worker import InlineMPC
-
-    class DeferringInlineMPC(InlineMPC):
-        defer_submit = True
-
-    return DeferringInlineMPC(controller.mpc)
-
-
 def episode_entry(log) -> dict:
     """What the record keeps of one episode: its deterministic figures and the hashes of its commands and path."""
     import numpy as np
@@ -196,11 +185,9 @@ class Episodes:
             return {cell.key(seed): {"skipped": str(exc)} for seed in cell.seeds}
         sensor = moving_target.make_sensor(args, world, config.dt_s)
         controller = HybridController(config)
-        deadline = None
-        if cell.order == DEADLINE_ORDER:
-            deadline = OnTime()
-            if controller.mpc is not None:
-                controller.use_mpc_worker(_deferring_mpc(controller))
+        # the deadline order hands the MPC its problems after each command (mmact_ctrl.tick_order.DeadlineOrder), as
+        # real time's MPC process is; solved inline at once: deterministic
+        deadline = OnTime() if cell.order == DEADLINE_ORDER else None
         entries = {}
         try:
             for seed in cell.seeds:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.qp_id import REALTIME_MAX_ITER, QPConfig
+from controllers.qp_id import REALTIME_MAX_ITER, QPConfig, SolverSettings
 from controllers.retarget import RULES, RetargetConfig
 from controllers.target_estimator import FILTER_MODELS, EstimatorConfig
 from mmact_ctrl.config import MODES, StackConfig
@@ -301,7 +301,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
         # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
-        qp=QPConfig(max_iter=qp_max_iter(args)),
+        qp=QPConfig(solver=SolverSettings(max_iter=qp_max_iter(args))),
     )
 
 

@@ -76,7 +76,8 @@ def _chunk_lines(waypoints: np.ndarray, obs, dt_s: float) -> list[str]:
 def probe(args: argparse.Namespace) -> tuple[dict, int]:
     """Probe the server; returns (what was found, exit status)."""
     from mmact_ctrl.sources.conformance import reply_problems
-    from mmact_ctrl.sources.openpi import ClientConfig, RemoteSource
+    from mmact_ctrl.sources.openpi import ClientConfig
+    from mmact_ctrl.sources.remote import RemoteSource
     from scenarios.sources import SourceSettings, first_observation, scene_settings
     from scenarios.world.factory import make_world
 

@@ -5,7 +5,7 @@
     python -m scenarios.serve --source my_pkg.my_module:make_source --source-arg horizon=10
     python -m scenarios.serve --source expert --preset libero           # the expert speaking LIBERO's convention
 
-With ``--preset`` the source speaks that convention instead of ours (``mmact_ctrl.sources.openpi.preset_serving``):
+With ``--preset`` the source speaks that convention instead of ours (``mmact_ctrl.sources.remote.preset_serving``):
 it reads the convention's observation keys and answers its actions (LIBERO: successive normalised OSC steps at
 20 Hz; DROID: normalised joint velocities at 15 Hz), and declares only its ``action_horizon`` and the privileged keys
 it reads (the expert reads the true target): a client must say ``--preset`` itself, as with any foreign server.
@@ -13,7 +13,7 @@ it reads (the expert reads the true target): a client must say ``--preset`` itse
 Any openpi client (``openpi_client.websocket_client_policy.WebsocketClientPolicy``) can then drive it, and our stack
 can run it from another process (``mmact_ctrl.sources.openpi.RemoteSource``). The observation travels in the
 ``mmact`` mapping, the reply holds ``"actions"`` (H, 7) in our task space, and the metadata frame says everything a
-client of ours needs (``mmact_ctrl.sources.openpi.serving``). ``GET /healthz`` answers ``OK``.
+client of ours needs (``mmact_ctrl.sources.remote.serving``). ``GET /healthz`` answers ``OK``.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import sys
 
 from mmact_ctrl.sources.contract import check_source
 from mmact_ctrl.sources.openpi.server import DEFAULT_PORT, ListenError, PolicyServer
-from mmact_ctrl.sources.openpi.serving import SourcePolicy
+from mmact_ctrl.sources.remote.serving import SourcePolicy
 from scenarios.cli import OneLineErrorParser as _OneLineErrorParser
 from scenarios.cli import number as _number
 from scenarios.world.expert import LEADS
@@ -193,8 +193,8 @@ def make_policy(args: argparse.Namespace, source, scene: dict):
     if conv is None:
         return SourcePolicy(check_source(source, f"--source {args.source}"), scene=scene,
                             infer_delay_ms=args.infer_delay_ms)
-    from mmact_ctrl.sources.openpi.mapping import PRIVILEGED_PARTS
-    from mmact_ctrl.sources.openpi.preset_serving import ConventionPolicy
+    from mmact_ctrl.sources.remote.mapping import PRIVILEGED_PARTS
+    from mmact_ctrl.sources.remote.preset_serving import ConventionPolicy
 
     check_source(source, f"--source {args.source}")
     expert = args.source == "expert"

@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
+from mmact_ctrl.sources.spec import SourceSpec
+
 #: the sources built in by name
 BUILTIN_SOURCES: tuple[str, ...] = ("policy", "expert")
 
@@ -148,7 +150,7 @@ def settings_from_args(args: argparse.Namespace) -> SourceSettings:
 
 
 def _remote(settings: SourceSettings):
-    from mmact_ctrl.sources.openpi import RemoteSource
+    from mmact_ctrl.sources.remote import RemoteSource
 
     return RemoteSource(settings.spec, settings.convention_switches())
 
@@ -182,17 +184,12 @@ def scene_settings(source) -> dict:
         from scenarios.world.factory import policy_scene
 
         return policy_scene(source)
-    out: dict = {}
-    scene = getattr(source, "scene", None) or {}
-    for key in ("plane_z_m", "n_objects"):
-        if key in scene:
-            out[key] = scene[key]
-    cameras = getattr(source, "camera_names", None)
-    if cameras:
-        out["cameras"] = tuple(cameras)
-    size = getattr(source, "image_size_px", None)
-    if size:
-        out["image_size_px"] = int(size)
+    spec = SourceSpec.of(source)
+    out: dict = {k: spec.scene[k] for k in ("plane_z_m", "n_objects") if k in spec.scene}
+    if spec.camera_names:
+        out["cameras"] = spec.camera_names
+    if spec.image_size_px:
+        out["image_size_px"] = spec.image_size_px
     return out
 
 
@@ -225,11 +222,11 @@ def first_observation(world, seed: int, needs_image: bool, model=None):
 
 def connect_check(source, world, seed: int, replan_hz: float | None, latency_s: float | None, latency_from: str):
     """For a policy server (a ``RemoteSource``): send it the first episode's first observation and return the
-    :class:`~mmact_ctrl.sources.openpi.connect.ConnectReport` (None for any other source). A server that fails on
+    :class:`~mmact_ctrl.sources.remote.connect.ConnectReport` (None for any other source). A server that fails on
     it, or a reply that does not fit the convention, raises ``ConnectError`` (one line) before any episode.
     ``latency_s``: the latency chunks become active after (None: the first call's round trip)."""
-    from mmact_ctrl.sources.openpi import RemoteSource
-    from mmact_ctrl.sources.openpi.connect import connect_report, first_call
+    from mmact_ctrl.sources.remote import RemoteSource
+    from mmact_ctrl.sources.remote.connect import connect_report, first_call
 
     if not isinstance(source, RemoteSource):
         return None

@@ -107,10 +107,10 @@ class DashExecutor(ClockedExecutor):
 def test_the_qp_keeps_the_tcp_under_its_speed_limit_whatever_the_executor_asks(cap_m_s, ok):
     """With the QP's velocity-target cap (default 1.4 m/s) the dash is followed within 1.7 m/s; without it the
     same command breaks the limit (so the test can fail)."""
-    from controllers.qp_id import QPConfig
+    from controllers.qp_id import QPConfig, TcpGains
 
     w = make_world(target="static")
-    cfg = StackConfig(mode="open_loop", duration_s=2.5, qp=QPConfig(tcp_vel_cap_m_s=cap_m_s))
+    cfg = StackConfig(mode="open_loop", duration_s=2.5, qp=QPConfig(tcp=TcpGains(tcp_vel_cap_m_s=cap_m_s)))
     log = run_episode(w, make_expert(), HybridController(cfg, executor=DashExecutor()), seed=2)
     m = episode_metrics(log)
     speed = np.linalg.norm(np.diff(log.ee_pos_m, axis=0), axis=1) / 1e-3

@@ -42,7 +42,7 @@ def test_log3_matches_pinocchio(angle):
 
 def test_accel_bounds_match_numpy_reference_including_outside_the_viable_set():
     qp = TaskSpaceQP(QPConfig())
-    b = qp._bounds
+    b = qp.default_limits.viability.bounds
     rng = np.random.default_rng(1)
     lb, ub = np.empty(7), np.empty(7)
     crossed = 0

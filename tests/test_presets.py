@@ -23,8 +23,9 @@ from mmact_ctrl.chunk import Observation
 from mmact_ctrl.sources import ActionSpace, SourceError
 from mmact_ctrl.sources.action_encoder import ActionEncoder
 from mmact_ctrl.sources.action_space import ActionAdapter
-from mmact_ctrl.sources.openpi import ClientConfig, PolicyServer, RemoteSource, load_mapping
-from mmact_ctrl.sources.openpi.connect import coverage, suggest_replan_hz
+from mmact_ctrl.sources.openpi import ClientConfig, PolicyServer
+from mmact_ctrl.sources.remote import RemoteSource, load_mapping
+from mmact_ctrl.sources.remote.connect import coverage, suggest_replan_hz
 from mmact_ctrl.sources.presets import DROID, LIBERO, PRESETS, load_preset
 from mmact_ctrl.sources.presets.resolve import ConventionSwitches, resolve
 from scenarios import serve

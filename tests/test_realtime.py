@@ -163,7 +163,7 @@ def test_the_mpc_process_handing_late_plans_is_survived(world):
 
 
 def test_a_real_time_episode_with_a_served_source_runs_end_to_end():
-    from mmact_ctrl.sources.openpi import RemoteSource
+    from mmact_ctrl.sources.remote import RemoteSource
     from scenarios.served import ServedSource, serve_argv
     from scenarios.sources import SourceSettings
 

@@ -20,10 +20,10 @@ from openpi_client.websocket_client_policy import WebsocketClientPolicy
 
 from mmact_ctrl.chunk import Observation
 from mmact_ctrl.sources import ActionSpace, SourceError, require_capabilities
-from mmact_ctrl.sources.openpi import (ClientConfig, ConnectionLost, FrameError, KeyMapping, MmactMapping,
-                                       PolicyClient, PolicyServer, RemoteSource, RequestTimeout, ServerError,
-                                       ServerUnreachable, SourcePolicy, StateKey, codec, load_mapping)
-from mmact_ctrl.sources.openpi.mapping import SCENE_CAMERAS, resize_bilinear
+from mmact_ctrl.sources.openpi import (ClientConfig, ConnectionLost, FrameError, PolicyClient, PolicyServer,
+                                       RequestTimeout, ServerError, ServerUnreachable, codec)
+from mmact_ctrl.sources.remote import KeyMapping, MmactMapping, RemoteSource, SourcePolicy, StateKey, load_mapping
+from mmact_ctrl.sources.remote.mapping import SCENE_CAMERAS, resize_bilinear
 from scenarios.world.factory import make_expert
 
 FAST = ClientConfig(connect_timeout_s=1.0, connect_tries=2, retry_wait_s=0.1, request_timeout_s=2.0,
@@ -315,7 +315,8 @@ def test_server_down_at_connect_is_one_line_within_the_retry_budget():
         RemoteSource(url, mapping=STATE_ONLY, action_space=ActionSpace(), config=FAST)
     assert time.perf_counter() - t0 < FAST.connect_tries * FAST.connect_timeout_s + FAST.retry_wait_s + 0.5
     msg = str(err.value)
-    assert url in msg and "2 tries" in msg and "\n" not in msg and isinstance(err.value, SourceError)
+    # a ConnectionError: the command lines print it as their one line
+    assert url in msg and "2 tries" in msg and "\n" not in msg and isinstance(err.value, ConnectionError)
 
 
 def test_a_server_that_accepts_but_never_answers_the_handshake_is_bounded():
@@ -423,9 +424,9 @@ def test_a_restarted_server_serving_another_source_is_refused(expert):
 
 def test_foreign_server_needs_a_mapping_and_an_action_space(scripted):
     _, handle = scripted
-    with pytest.raises(SourceError, match="no conventions.*also need --obs-mapping"):
+    with pytest.raises(SourceError, match="does not declare its convention.*also need --obs-mapping"):
         RemoteSource(handle.url, action_space=ActionSpace(), config=FAST)
-    with pytest.raises(SourceError, match="no conventions.*--obs-mapping also needs --action-space --gripper --chunk-dt-s"):
+    with pytest.raises(SourceError, match="does not declare its convention.*--obs-mapping also needs --action-space --gripper --chunk-dt-s"):
         RemoteSource(handle.url, mapping=STATE_ONLY, config=FAST)
 
 
@@ -492,11 +493,18 @@ def test_serve_cli_serves_until_terminated():
             proc.communicate()
 
 
-def test_the_openpi_package_never_imports_mujoco_or_scenarios():
-    code = ("import sys, mmact_ctrl.sources.openpi, mmact_ctrl.sources.openpi.bench; "
-            "bad = [m for m in sys.modules if m == 'mujoco' or m.startswith(('mujoco.', 'scenarios'))]; "
+def test_the_openpi_package_is_a_protocol_package_another_project_could_vendor(tmp_path):
+    """Its files copied out under another name import and serve without anything else of this project."""
+    import shutil
+
+    src = __import__("pathlib").Path(__file__).parents[1] / "mmact_ctrl" / "sources" / "openpi"
+    shutil.copytree(src, tmp_path / "vendored_openpi", ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("import sys, numpy as np, vendored_openpi as p, vendored_openpi.bench; "
+            "h = p.PolicyServer(type('P', (), {'infer': lambda self, o: {'actions': np.zeros((2, 7))}})(), port=0).start(); "
+            "c = p.PolicyClient(h.url); assert c.infer({'x': np.ones(3)})['actions'].shape == (2, 7); c.close(); h.stop(); "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('mmact_ctrl', 'scenarios', 'controllers', 'policy', 'mujoco')]; "
             "assert not bad, bad")
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(tmp_path))
 
 
 # ---- end to end: an episode through a server ---------------------------------------------------------------------

@@ -26,7 +26,7 @@ from mmact_ctrl.chunk import ActionChunk, ChunkSource, Observation
 from mmact_ctrl.reference import ChunkReference
 
 if TYPE_CHECKING:  # pragma: no cover
-    from mmact_ctrl.controller import HybridController
+    from mmact_ctrl.control.view import ExecutorView
 
 
 @dataclass(frozen=True)
@@ -55,11 +55,14 @@ class QueryContext:
             longest of the recent measured round trips).
         scheduled: the chunk that will be executing while the new one is computed (the last one accepted, pending
             or active), or None.
+        chunk_dt_s: the source's declared waypoint spacing, s (``mmact_ctrl.sources.spec.SourceSpec``; None: not
+            declared).
     """
 
     t_s: float
     latency_s: float
     scheduled: ActionChunk | None
+    chunk_dt_s: float | None = None
 
 
 @runtime_checkable
@@ -74,8 +77,9 @@ class ChunkExecutor(Protocol):
     #: episode starts: a source without them is refused in one line, never run into a silent episode.
     needs: frozenset[str]
 
-    def bind(self, controller: "HybridController") -> None:
-        """Called once by the controller that runs this executor (gives access to its config, model, estimator)."""
+    def bind(self, view: "ExecutorView") -> None:
+        """Called once by the controller that runs this executor, with the narrow read-only view it may know
+        (``mmact_ctrl.control.view.ExecutorView``: the stack's settings, the target estimate, the TCP's state)."""
         ...
 
     def reset(self) -> None:
@@ -139,10 +143,10 @@ class ClockedExecutor:
     needs: frozenset[str] = frozenset()
 
     def __init__(self) -> None:
-        self.controller: "HybridController | None" = None
+        self.view: "ExecutorView | None" = None
 
-    def bind(self, controller: "HybridController") -> None:
-        self.controller = controller
+    def bind(self, view: "ExecutorView") -> None:
+        self.view = view
 
     def reset(self) -> None:
         pass

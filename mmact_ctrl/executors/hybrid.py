@@ -58,11 +58,11 @@ class HybridExecutor(ClockedExecutor):
         a moving point: it is trusted when some waypoint of it comes within the trust radius of the target estimate
         predicted to that waypoint's time."""
         if self._trust[0] is not ref:
-            cfg = self.controller.config.retarget
+            cfg = self.view.config.retarget
             leading = not ref.at_rest
             ok = trusted(cfg, ref.aim_pos_m, ref.target_at_obs_m)
-            if leading and ref.target_at_obs_m is not None and cfg.rule != "none" and self.controller.filter.initialized:
-                pred = self.controller.filter.predict_pos_many(ref.chunk.times_s)
+            if leading and ref.target_at_obs_m is not None and cfg.rule != "none" and self.view.estimate.initialized:
+                pred = self.view.estimate.predict_pos_many(ref.chunk.times_s)
                 ok = bool(np.min(np.linalg.norm(ref.chunk.waypoints[:, :3] - pred, axis=1)) <= cfg.trust_radius_m)
             self._trust = (ref, (ok, leading))
         return self._trust[1]
@@ -78,7 +78,7 @@ class HybridExecutor(ClockedExecutor):
     def _blend_end_s(self, ref: ChunkReference) -> float:
         """The retargeting blend ends at the last waypoint of ``ref`` that will actually run: the next chunk is due
         one replan period after this one became active."""
-        return min(ref.t_last_s, ref.t_active_s + 1.0 / self.controller.config.replan_hz)
+        return min(ref.t_last_s, ref.t_active_s + 1.0 / self.view.config.replan_hz)
 
     def offset(self, t_s: float, ref: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
         """A chunk at rest at its end: ``controllers.retarget.retarget_offset`` (the rule of ``config.retarget``;
@@ -88,11 +88,11 @@ class HybridExecutor(ClockedExecutor):
         pulled in, blended over :meth:`_pull_span_s` from the step ``c`` it carries over from the previous reference
         (:meth:`_carry_for`): ``(1 - alpha(t)) c + alpha(t) (p_hat(t) - w(t))``, whatever the rule but ``none``
         (adding the target's displacement as for a resting chunk would count its motion twice)."""
-        est = self.controller.filter
+        est = self.view.estimate
         ok, leading = self._aim(ref)
         if not (est.initialized and ok):
             return ZERO3, ZERO3
-        cfg = self.controller.config.retarget
+        cfg = self.view.config.retarget
         if leading:
             w, w_rate = ref.sample(t_s)
             span = self._pull_span_s(ref)
@@ -110,7 +110,7 @@ class HybridExecutor(ClockedExecutor):
                                est.predict_vel(t_s), ref.t_active_s, self._blend_end_s(ref), weight)
 
     def offsets_many(self, times_s: np.ndarray, ref: ChunkReference) -> np.ndarray | None:
-        est = self.controller.filter
+        est = self.view.estimate
         ok, leading = self._aim(ref)
         if not (est.initialized and ok):
             return None
@@ -119,7 +119,7 @@ class HybridExecutor(ClockedExecutor):
             alpha = np.clip((np.asarray(times_s, dtype=float) - ref.t_active_s) / self._pull_span_s(ref), 0.0, 1.0)
             carry = self._carry_for(ref, ref.t_active_s)
             return (1.0 - alpha)[:, None] * carry + alpha[:, None] * (pred - ref.sample_positions(times_s))
-        cfg = self.controller.config.retarget
+        cfg = self.view.config.retarget
         weights = None
         if cfg.rule == "warp":
             weights = progresses(cfg, ref.aim_pos_m, ref.chunk.waypoints[0, :3], ref.sample_positions(times_s))

@@ -32,5 +32,5 @@ class InpaintExecutor(ClockedExecutor):
     needs = frozenset({"inpaint"})
 
     def request(self, source: ChunkSource, observation: Observation, ctx: QueryContext) -> Callable[[], ActionChunk]:
-        prefix = known_prefix(ctx.scheduled, ctx.t_s, ctx.latency_s, getattr(source, "chunk_dt_s", None))
+        prefix = known_prefix(ctx.scheduled, ctx.t_s, ctx.latency_s, ctx.chunk_dt_s)
         return lambda: source.plan_inpaint(observation, prefix)

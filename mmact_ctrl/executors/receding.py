@@ -28,7 +28,7 @@ class RecedingExecutor(ClockedExecutor):
         return math.inf if chunk is not None else t_s + period_s
 
     def after_activation(self, t_s: float, ref: ChunkReference, next_query_s: float) -> float:
-        cfg = self.controller.config
+        cfg = self.view.config
         return t_s + receding_k(cfg.receding_k, cfg.replan_hz, ref.chunk) * ref.chunk.dt_s
 
     def after_refusal(self, t_s: float, next_query_s: float) -> float:

@@ -44,14 +44,14 @@ class ResidualExecutor(ClockedExecutor):
         self._period_s = 0.01
         self.updates = 0
 
-    def bind(self, controller) -> None:
-        super().bind(controller)
+    def bind(self, view) -> None:
+        super().bind(view)
         if self.policy is None:
             from policy.residual import DEFAULT_RESIDUAL_CHECKPOINT, ResidualPolicy
 
-            path = controller.config.residual_checkpoint or DEFAULT_RESIDUAL_CHECKPOINT
+            path = view.config.residual_checkpoint or DEFAULT_RESIDUAL_CHECKPOINT
             self.policy = ResidualPolicy.load(path)
-        self._period_s = 1.0 / controller.config.perception_hz
+        self._period_s = 1.0 / view.config.perception_hz
 
     def reset(self) -> None:
         self._meas = []
@@ -99,14 +99,14 @@ class ResidualExecutor(ClockedExecutor):
         from policy.residual import residual_features
 
         meas = self._measurements()
-        terms = self.controller.terms
-        if meas is None or terms is None:
+        tcp_pos, tcp_vel = self.view.tcp_pos_m, self.view.tcp_vel_m_s
+        if meas is None or tcp_pos is None:
             return ZERO3
         z, z_prev, gap_s = meas
         base = ref.sample(t_s)[0][:3]
         chunk = ref.chunk
         feats = residual_features(base, t_s - chunk.t0_s, chunk.horizon * chunk.dt_s, z, z_prev, gap_s,
-                                  terms.pos_m, terms.vel[:3])
+                                  tcp_pos, tcp_vel)
         corr = np.asarray(self.policy.correction_m(feats), dtype=float).reshape(3)
         return corr if np.all(np.isfinite(corr)) else ZERO3
 

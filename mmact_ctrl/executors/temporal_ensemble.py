@@ -28,7 +28,7 @@ class TemporalEnsembleExecutor(ClockedExecutor):
     def sample(self, t_s: float, active: ChunkReference) -> tuple[np.ndarray, np.ndarray]:
         live = [c for c in self.chunks if c.t_last_s >= t_s] or [self.chunks[-1] if self.chunks else active]
         oldest = live[0].chunk.t0_s
-        decay = self.controller.config.ensemble_decay_per_s
+        decay = self.view.config.ensemble_decay_per_s
         action, rate, total = np.zeros(7), np.zeros(7), 0.0
         for c in live:
             w = float(np.exp(-decay * (c.chunk.t0_s - oldest)))

@@ -5,7 +5,7 @@ grasp rad, gripper opening m; ``mmact_ctrl.chunk``) answered to an ``Observation
 :class:`~mmact_ctrl.sources.action_space.ActionSpace`, such that that space's
 :class:`~mmact_ctrl.sources.action_space.ActionAdapter` gives the waypoints back (to float precision; joint spaces
 through inverse kinematics, ``controllers.ik``, to its tolerance). It lets a source of ours speak a foreign
-convention (``mmact_ctrl.sources.openpi.preset_serving``), which is how a convention is tested end to end: the same
+convention (``mmact_ctrl.sources.remote.preset_serving``), which is how a convention is tested end to end: the same
 expert, natively and through the convention, must give the same episodes.
 
 Values that fall outside the space's ``clip`` range after unscaling are clipped (as a policy trained on that range

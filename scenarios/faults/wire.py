@@ -21,10 +21,10 @@ import time
 
 import numpy as np
 
-from mmact_ctrl.sources.openpi import RemoteSource
+from mmact_ctrl.sources.remote import RemoteSource
 from mmact_ctrl.sources.openpi.client import ClientConfig
 from mmact_ctrl.sources.openpi.server import PolicyServer
-from mmact_ctrl.sources.openpi.serving import SourcePolicy
+from mmact_ctrl.sources.remote.serving import SourcePolicy
 
 BEHAVIOURS: tuple[str, ...] = ("error_frame", "slow", "bad_shape", "nan", "dies")
 #: the client of the wire faults: a request times out after 0.3 s, a lost server is retried once for 0.3 s

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mmact_ctrl.sources.openpi import codec
-from mmact_ctrl.sources.openpi.client import ClientConfig, PolicyClient
-from mmact_ctrl.sources.openpi.server import PolicyServer
+from . import codec
+from .client import ClientConfig, PolicyClient
+from .server import PolicyServer
 
 
 class TrivialPolicy:

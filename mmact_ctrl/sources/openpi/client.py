@@ -8,7 +8,7 @@ sends the traceback as a text frame and closes the connection.
 Every failure is bounded in time and raised as a :class:`WireError` subclass with one line naming the URL:
 
 ``ServerUnreachable``  connecting failed ``connect_tries`` times (each within ``connect_timeout_s``); also a
-                       :class:`~mmact_ctrl.sources.contract.SourceError`, so the CLIs print it as one line;
+                       ``ConnectionError``, so the command lines print it as one line;
 ``RequestTimeout``     no reply within ``request_timeout_s``;
 ``ConnectionLost``     the connection closed under a request (the server stopped or crashed);
 ``ServerError``        the server answered a text frame (its error); carries the exception line and the full text;
@@ -31,8 +31,7 @@ from dataclasses import dataclass
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from websockets.sync.client import ClientConnection, connect
 
-from mmact_ctrl.sources.contract import SourceError
-from mmact_ctrl.sources.openpi import codec
+from . import codec
 
 
 #: ``connect`` switches of the installed websockets that exist there: a direct connection (never through a proxy the
@@ -45,7 +44,7 @@ class WireError(Exception):
     """Any failure of the policy server link (one line, naming the URL)."""
 
 
-class ServerUnreachable(WireError, SourceError):
+class ServerUnreachable(WireError, ConnectionError):
     """The server could not be reached (at connect time: the source cannot be built)."""
 
 

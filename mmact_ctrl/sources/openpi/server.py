@@ -30,7 +30,7 @@ from websockets.asyncio.server import Request, Response, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
 
-from mmact_ctrl.sources.openpi import codec
+from . import codec
 
 log = logging.getLogger(__name__)
 

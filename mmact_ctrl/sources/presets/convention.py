@@ -9,7 +9,7 @@ one in a JSON file (:func:`convention_from_dict`)::
     {
       "name": "my_robot",                       # default: the file name
       "based_on": "libero",                     # optional: start from a preset, override what follows
-      "observation": {...},                     # an observation mapping (mmact_ctrl.sources.openpi.mapping schema)
+      "observation": {...},                     # an observation mapping (mmact_ctrl.sources.remote.mapping schema)
       "action": {"kind": "tcp_delta", "gripper": "sign", "control_hz": 20,   # or "dt_s": 0.05
                  "delta_from": "previous", "rotation": "nominal",
                  "scale": [0.05, 0.05, 0.05, 0.5, 0.5, 0.5], "clip": [-1, 1]},
@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mmact_ctrl.sources.action_space import ActionSpace
-from mmact_ctrl.sources.openpi.mapping import KeyMapping, MmactMapping, ObsMapping
+from mmact_ctrl.sources.remote.mapping import KeyMapping, MmactMapping, ObsMapping
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ positions instead: ``examples/presets/droid_joint_position.json`` defines that v
 from __future__ import annotations
 
 from mmact_ctrl.sources.action_space import ActionSpace
-from mmact_ctrl.sources.openpi.mapping import ImageKey, KeyMapping, StateKey
+from mmact_ctrl.sources.remote.mapping import ImageKey, KeyMapping, StateKey
 from mmact_ctrl.sources.presets.convention import Convention
 
 #: DROID's control rate, Hz

@@ -31,7 +31,7 @@ has no wrist camera. Positions are in our world frame (the robot base at the ori
 from __future__ import annotations
 
 from mmact_ctrl.sources.action_space import ActionSpace
-from mmact_ctrl.sources.openpi.mapping import ImageKey, KeyMapping, StateKey
+from mmact_ctrl.sources.remote.mapping import ImageKey, KeyMapping, StateKey
 from mmact_ctrl.sources.presets.convention import Convention
 
 #: robosuite OSC_POSE (1.4.1): one unit of input is 0.05 m / 0.5 rad per step

@@ -6,7 +6,7 @@ metadata, so a client of ours needs no switch; ``--preset mmact`` names it for a
 from __future__ import annotations
 
 from mmact_ctrl.sources.action_space import ActionSpace
-from mmact_ctrl.sources.openpi.mapping import MmactMapping
+from mmact_ctrl.sources.remote.mapping import MmactMapping
 from mmact_ctrl.sources.presets.convention import Convention
 
 MMACT = Convention(
@@ -15,5 +15,5 @@ MMACT = Convention(
     action=ActionSpace(kind="tcp_pose", gripper="width_m", dt_s=0.1),
     horizon=16,
     state_rotation="rotation vector relative to the nominal grasp (mmact/ee_rotvec_rad)",
-    sources=("mmact_ctrl.chunk.ActionChunk, mmact_ctrl.sources.openpi.serving",),
+    sources=("mmact_ctrl.chunk.ActionChunk, mmact_ctrl.sources.remote.serving",),
 )

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 from mmact_ctrl.sources.action_space import GRIPPERS, KINDS, ActionSpace
 from mmact_ctrl.sources.contract import SourceError
-from mmact_ctrl.sources.openpi.mapping import (PRIVILEGED_PARTS, SCENE_CAMERAS, KeyMapping, MmactMapping, ObsMapping,
+from mmact_ctrl.sources.remote.mapping import (PRIVILEGED_PARTS, SCENE_CAMERAS, KeyMapping, MmactMapping, ObsMapping,
                                                load_mapping)
 from mmact_ctrl.sources.presets import PRESETS, Convention, load_preset
 from mmact_ctrl.sources.presets.convention import with_scene_cameras

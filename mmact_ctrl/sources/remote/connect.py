@@ -23,7 +23,7 @@ import numpy as np
 from mmact_ctrl.chunk import Observation
 from mmact_ctrl.sources.conformance import GRIPPER_MEANING, reply_problems
 from mmact_ctrl.sources.contract import SourceError
-from mmact_ctrl.sources.openpi.mapping import KeyMapping
+from mmact_ctrl.sources.remote.mapping import KeyMapping
 
 #: the first call may take long: a server compiles its model on its first request (openpi's JAX models do)
 FIRST_CALL_TIMEOUT_S = 60.0

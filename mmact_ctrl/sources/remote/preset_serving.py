@@ -25,8 +25,8 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.sources.action_encoder import ActionEncoder
 from mmact_ctrl.sources.action_space import GRIPPER_MAX_M
 from mmact_ctrl.sources.contract import source_name
-from mmact_ctrl.sources.openpi.mapping import PRIVILEGED_PARTS, STATE_PARTS, KeyMapping
-from mmact_ctrl.sources.openpi.serving import METADATA_VERSION
+from mmact_ctrl.sources.remote.mapping import PRIVILEGED_PARTS, STATE_PARTS, KeyMapping
+from mmact_ctrl.sources.remote.serving import METADATA_VERSION
 
 
 def _parts(mapping: KeyMapping, obs: dict) -> dict[str, np.ndarray]:

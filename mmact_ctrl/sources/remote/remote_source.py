@@ -1,7 +1,7 @@
 """A chunk source behind a policy server speaking openpi's protocol (``--source ws://HOST:PORT``).
 
 :class:`RemoteSource` maps each ``Observation`` to the server's observation dict (an observation mapping,
-:mod:`~mmact_ctrl.sources.openpi.mapping`), calls the server (:class:`~mmact_ctrl.sources.openpi.client.PolicyClient`)
+:mod:`~mmact_ctrl.sources.remote.mapping`), calls the server (:class:`~mmact_ctrl.sources.openpi.client.PolicyClient`)
 and turns the reply's ``"actions"`` (H, D) of the declared :class:`~mmact_ctrl.sources.action_space.ActionSpace` into
 our task-space ``ActionChunk``, whose ``info`` holds
 
@@ -12,7 +12,7 @@ our task-space ``ActionChunk``, whose ``info`` holds
 Which keys to send and what the replies mean is the server's convention
 (:class:`~mmact_ctrl.sources.presets.Convention`), settled at connect from the server's metadata and the user's
 switches (:mod:`mmact_ctrl.sources.presets.resolve`): a server of ours declares everything in its metadata
-(``"mmact"``, see :mod:`~mmact_ctrl.sources.openpi.serving`); a foreign server is given a preset (``--preset
+(``"mmact"``, see :mod:`~mmact_ctrl.sources.remote.serving`); a foreign server is given a preset (``--preset
 libero``) or the pieces; neither is one line, before any episode. The true target (privileged keys) reaches only a
 server of ours that asks for it, or one the user chose the ``mmact`` keys for.
 
@@ -31,7 +31,7 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.sources.action_space import ActionAdapter, ActionSpace
 from mmact_ctrl.sources.contract import CAPABILITIES, SourceError
 from mmact_ctrl.sources.openpi.client import ClientConfig, PolicyClient
-from mmact_ctrl.sources.openpi.mapping import KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, SCENE_CAMERAS, TOKENS_KEY, ObsMapping
+from mmact_ctrl.sources.remote.mapping import KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, SCENE_CAMERAS, TOKENS_KEY, ObsMapping
 from mmact_ctrl.sources.presets.resolve import ConventionSwitches, Resolved, resolve
 
 

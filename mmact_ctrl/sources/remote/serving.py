@@ -1,6 +1,6 @@
 """Any chunk source of ours as an openpi policy (``infer(obs: dict) -> dict``), with the metadata our client reads.
 
-The observation arrives in the ``mmact`` mapping (:class:`~mmact_ctrl.sources.openpi.mapping.MmactMapping`), is
+The observation arrives in the ``mmact`` mapping (:class:`~mmact_ctrl.sources.remote.mapping.MmactMapping`), is
 rebuilt into the exact ``Observation`` and planned by the source; the reply holds
 
 ``actions``          the chunk's waypoints (H, 7) float64 in our task space (TCP position m, rotation vector
@@ -35,8 +35,9 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.sources.action_space import ActionSpace
-from mmact_ctrl.sources.contract import capabilities, source_name
-from mmact_ctrl.sources.openpi.mapping import KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, TOKENS_KEY, MmactMapping
+from mmact_ctrl.sources.contract import source_name
+from mmact_ctrl.sources.spec import SourceSpec
+from mmact_ctrl.sources.remote.mapping import KNOWN_ACTIONS_KEY, N_CLIPPED_KEY, TOKENS_KEY, MmactMapping
 
 #: the version of our metadata extension
 METADATA_VERSION = 1
@@ -48,27 +49,26 @@ def _float_or_none(value) -> float | None:
 
 def source_metadata(source, scene: dict | None = None) -> dict:
     """The metadata frame of ``source`` served by :class:`SourcePolicy` (``scene``: its ``make_world`` settings,
-    default ``source.scene``)."""
-    dt = float(getattr(source, "chunk_dt_s", 0.0) or 0.0)
-    if not dt > 0:
-        raise ValueError(f"source {source_name(source)!r} has no chunk_dt_s > 0 (got {dt!r}): a client cannot time its "
-                         "waypoints")
-    needs_image = bool(getattr(source, "needs_image", False))
-    cams = tuple(getattr(source, "camera_names", None) or (("front",) if needs_image else ()))
-    size = getattr(source, "image_size_px", None)
-    tok = getattr(source, "action_token_range", None)
-    scene = scene if scene is not None else getattr(source, "scene", None)
+    default what the source declares)."""
+    spec = SourceSpec.of(source)
+    dt = spec.chunk_dt_s
+    if not (isinstance(dt, (int, float)) and dt > 0):
+        raise ValueError(f"source {spec.name!r} has no chunk_dt_s > 0 (got {dt!r}): a client cannot time its waypoints")
+    dt = float(dt)
+    cams = spec.camera_names or (("front",) if spec.needs_image else ())
+    tok = spec.action_token_range
+    scene = scene if scene is not None else (spec.scene or None)
     return {"mmact": {
         "version": METADATA_VERSION,
-        "source": source_name(source),
+        "source": spec.name,
         "obs_mapping": "mmact",
         "action_space": ActionSpace(dt_s=dt).to_dict(),
-        "needs_image": needs_image,
+        "needs_image": spec.needs_image,
         "camera_names": list(cams),
-        "image_size_px": None if size is None else int(size),
-        "prev_frame_gap_s": float(getattr(source, "prev_frame_gap_s", 0.0) or 0.0),
+        "image_size_px": spec.image_size_px,
+        "prev_frame_gap_s": spec.prev_frame_gap_s,
         "chunk_dt_s": dt,
-        "capabilities": sorted(capabilities(source)),
+        "capabilities": sorted(spec.capabilities),
         "action_token_range": None if tok is None else [int(tok[0]), int(tok[1])],
         "scene": None if scene is None else {k: (v if isinstance(v, (str, bool, int)) else _float_or_none(v))
                                              for k, v in dict(scene).items() if k in ("plane_z_m", "n_objects")},
