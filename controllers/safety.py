@@ -49,6 +49,7 @@ from types import MappingProxyType
 import numpy as np
 from numba import njit
 
+from controllers.layout import packed_layout
 from controllers.robot_description import JointLimits
 
 KINDS: tuple[str, ...] = ("nonfinite", "torque_rate", "torque", "position", "velocity", "accel", "jerk", "tcp_speed")
@@ -60,13 +61,14 @@ LIMIT_RTOL = 1e-9
 
 N_JOINTS = 7
 
-# Layout of the packed limit vector ``lim`` read by :func:`check_tick` (thresholds, tolerance included).
-_TAU, _Q_LO, _Q_HI, _V, _A, _J = 0, 7, 14, 21, 28, 35
-_DTAU, _TCP, _DT = 42, 43, 44
-N_LIM = 45
+# Layout of the packed limit vector ``lim`` read by :func:`check_tick` (thresholds, tolerance included); numba freezes
+# the module-level ints below as constants.
+LIMITS_LAYOUT, N_LIM = packed_layout(("tau", 7), ("q_lo", 7), ("q_hi", 7), ("v", 7), ("a", 7), ("j", 7), ("dtau", 1),
+                                     ("tcp", 1), ("dt", 1))
+_TAU, _Q_LO, _Q_HI, _V, _A, _J, _DTAU, _TCP, _DT = LIMITS_LAYOUT.values()
 # Layout of the state vector: last finite torque received, last finite ddq command, largest torque rate.
-_S_TAU, _S_DDQ, _S_RATE_MAX = 0, 7, 14
-N_STATE = 15
+STATE_LAYOUT, N_STATE = packed_layout(("tau", 7), ("ddq", 7), ("rate_max", 1))
+_S_TAU, _S_DDQ, _S_RATE_MAX = STATE_LAYOUT.values()
 # Layout of the integer statistics: ticks flagged per kind, then ticks checked, ticks with any violation.
 _N_TICKS, _N_VIOL = len(KINDS), len(KINDS) + 1
 N_STATS = len(KINDS) + 2

@@ -17,15 +17,18 @@ import math
 import numpy as np
 from numba import njit
 
-# Layout of the ``params`` vector of :func:`assemble_qp` (filled by ``qp_params``).
-_KP6, _KD6, _W6 = 0, 6, 12
-_KP_POST, _KD_POST, _W_POST, _P_DIAG = 18, 19, 20, 21
-_Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = 22, 29, 36, 43, 50
-_DT, _INV_H, _DTAU = 57, 58, 59
-_DDQ_STEP = 60
-_E_MAX = 67
-_V_TCP = 68
-N_PARAMS = 69
+from controllers.layout import packed_layout
+
+# Layout of the ``params`` vector of :func:`assemble_qp` (filled by ``qp_params``); numba freezes the module-level
+# ints below as constants.
+QP_PARAMS, N_PARAMS = packed_layout(
+    ("kp6", 6), ("kd6", 6), ("w6", 6), ("kp_post", 1), ("kd_post", 1), ("w_post", 1), ("p_diag", 1), ("q_hi", 7),
+    ("q_lo", 7), ("v_max", 7), ("a_max", 7), ("tau_lim", 7), ("dt", 1), ("inv_h", 1), ("dtau", 1), ("ddq_step", 7),
+    ("e_max", 1), ("v_tcp", 1))
+_KP6, _KD6, _W6, _KP_POST, _KD_POST, _W_POST, _P_DIAG = (QP_PARAMS[k] for k in (
+    "kp6", "kd6", "w6", "kp_post", "kd_post", "w_post", "p_diag"))
+_Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = (QP_PARAMS[k] for k in ("q_hi", "q_lo", "v_max", "a_max", "tau_lim"))
+_DT, _INV_H, _DTAU, _DDQ_STEP, _E_MAX, _V_TCP = (QP_PARAMS[k] for k in ("dt", "inv_h", "dtau", "ddq_step", "e_max", "v_tcp"))
 
 
 def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s,

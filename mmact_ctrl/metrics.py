@@ -99,14 +99,8 @@ FAULT_KEYS: tuple[str, ...] = ("rejected_chunks", "watchdog_stops", "gated_measu
                                "floor_clamps")
 
 
-def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
-    """The per-episode figures (JSON-ready floats and ints)."""
-    dt = float(log.t_s[1] - log.t_s[0]) if len(log.t_s) > 1 else 1e-3
-    err = np.linalg.norm(log.ee_pos_m - log.target_pos_m, axis=1)
-    inside = err < config.success_radius_m
-    hold_n = max(1, int(round(config.success_hold_s / dt)))
-    start = _first_hold_start(inside, hold_n)
-    # jerk of the motion, at jerk_rate_hz
+def _motion_figures(log: EpisodeLog, dt: float, config: MetricsConfig) -> tuple[np.ndarray, list[float]]:
+    """(the TCP's jerk (N, 3) at ``jerk_rate_hz``, the largest acceleration within 5 samples of each chunk switch)."""
     stride = max(1, int(round(1.0 / (config.jerk_rate_hz * dt))))
     p = log.ee_pos_m[::stride]
     h = stride * dt
@@ -119,6 +113,11 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         lo, hi = max(0, i - 5), min(len(acc_n), i + 5)
         if hi > lo:
             switch_acc.append(float(acc_n[lo:hi].max()))
+    return jerk, switch_acc
+
+
+def _reached_wrong_object(log: EpisodeLog, hold_n: int, config: MetricsConfig) -> bool:
+    """Whether the TCP held within the success radius of an object other than the instructed one."""
     wrong_object = False
     if log.objects_pos_m is not None:
         for j in range(log.objects_pos_m.shape[1]):
@@ -126,20 +125,52 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
                 continue
             near = np.linalg.norm(log.ee_pos_m - log.objects_pos_m[:, j], axis=1) < config.success_radius_m
             wrong_object |= _first_hold_start(near, hold_n) is not None
-    safety = {key: int(log.safety_counts.get(kind, 0)) for kind, key in SAFETY_KEYS.items()}
+    return wrong_object
+
+
+def _jump_recoveries(log: EpisodeLog, inside: np.ndarray, dt: float, config: MetricsConfig) -> tuple[list, list]:
+    """(per target jump whose window fits in the episode: whether the TCP got back within the radius, the times it
+    took, s)."""
     recovered, recovery_s = [], []
     for tj in log.jump_times_s:
         j0 = int(np.ceil(tj / dt)) + 1
         j1 = j0 + int(round(config.jump_window_s / dt))
-        if j1 > len(err):  # the episode ends before the recovery window does: not counted
+        if j1 > len(inside):  # the episode ends before the recovery window does: not counted
             continue
         hit = np.flatnonzero(inside[j0:j1])
         recovered.append(bool(hit.size))
         if hit.size:
             recovery_s.append(float(hit[0] * dt))
+    return recovered, recovery_s
+
+
+def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) -> dict:
+    """The per-episode figures (JSON-ready floats and ints)."""
+    dt = float(log.t_s[1] - log.t_s[0]) if len(log.t_s) > 1 else 1e-3
+    err = np.linalg.norm(log.ee_pos_m - log.target_pos_m, axis=1)
+    inside = err < config.success_radius_m
+    hold_n = max(1, int(round(config.success_hold_s / dt)))
+    start = _first_hold_start(inside, hold_n)
+    jerk, switch_acc = _motion_figures(log, dt, config)
+    wrong_object = _reached_wrong_object(log, hold_n, config)
+    safety = {key: int(log.safety_counts.get(kind, 0)) for kind, key in SAFETY_KEYS.items()}
+    recovered, recovery_s = _jump_recoveries(log, inside, dt, config)
     sim_s = float(len(log.t_s) * dt)
     reaction = reaction_metrics(log.t_s, log.ee_pos_m, log.target_pos_m, log.change_times_s,
                                 success_radius_m=config.success_radius_m)
+    return {
+        **_outcome(log, err, inside, start, dt, jerk, switch_acc, wrong_object, safety),
+        **_survived(log),
+        **_timing(log, sim_s),
+        **_reactions(log, recovered, recovery_s, reaction),
+        **_realtime_episode(log),
+        # what the source said when it failed (whole); only when it did, so other episodes' figures are unchanged
+        **({"source_errors": [dict(e) for e in log.source_errors]} if log.source_errors else {}),
+    }
+
+
+def _outcome(log, err, inside, start, dt, jerk, switch_acc, wrong_object, safety) -> dict:
+    """Success, errors, smoothness and the safety counts."""
     return {
         "seed": int(log.seed),
         "instruction": log.instruction,
@@ -156,6 +187,12 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "limit_violations": int(sum(safety.values())),
         **safety,
         "torque_rate_max_nm_s": float(log.torque_rate_max_nm_s),
+    }
+
+
+def _survived(log: EpisodeLog) -> dict:
+    """The faults survived and counted: rejected chunks, watchdog stops, gated measurements, missed ticks, ..."""
+    return {
         "rejected_chunks": int(sum(log.rejections.values())),
         "rejections": {k: int(v) for k, v in log.rejections.items() if v},
         "watchdog_stops": int(log.watchdog_stops),
@@ -172,6 +209,13 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "perception_errors": int(log.perception_errors),
         "measurements": int(log.measurements),
         "measurements_lost": int(log.measurements_lost),
+    }
+
+
+def _timing(log: EpisodeLog, sim_s: float) -> dict:
+    """Wall-clock figures: the sensor's, the tick's, the MPC's, the source's, the real-time factor; and the solvers'
+    failures."""
+    return {
         "sensor_ms_per_sim_s": float(1e3 * log.sensor_wall_s / sim_s) if sim_s > 0 else float("nan"),
         "qp_failures": int(log.qp_failures),
         "smoother_failures": int(log.smoother_failures),
@@ -186,6 +230,12 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "plan_ms": [float(x) for x in log.plan_ms],
         "source_timing_ms": {k: [float(x) for x in v] for k, v in log.source_timing_ms.items()},
         "realtime_factor": sim_s / log.wall_s if log.wall_s > 0 else float("nan"),
+    }
+
+
+def _reactions(log: EpisodeLog, recovered: list, recovery_s: list, reaction: dict) -> dict:
+    """Jumps recovered, the reaction to a change of course, the inference delay as it ran."""
+    return {
         "n_jumps": len(recovered),
         "jumps_recovered": int(sum(recovered)),
         "jump_recovery_s": recovery_s,
@@ -195,9 +245,6 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         "changes_reacted": int(reaction["reacted"]),
         "d_measured": float(np.median(log.delay_steps)) if log.delay_steps else float("nan"),
         "d_steps": [float(x) for x in log.delay_steps],
-        **_realtime_episode(log),
-        # what the source said when it failed (whole); only when it did, so other episodes' figures are unchanged
-        **({"source_errors": [dict(e) for e in log.source_errors]} if log.source_errors else {}),
     }
 
 

@@ -504,7 +504,7 @@ def test_other_period_scales_the_rate_conditions():
         assert t(tau=_step(TAU0, 0, 2.0 + delta), ddq=_step(ddq0, 1, 7.5 + delta)) == expected
 
 
-def test_safety_imports_only_numpy_numba_and_the_robot_description():
+def test_safety_imports_only_numpy_numba_the_robot_description_and_the_layout_helper():
     """controllers/ may drive a real arm: no mujoco, nothing of mmact_ctrl/scenarios/policy."""
     src = Path(__file__).resolve().parents[1] / "controllers" / "safety.py"
     names = set()
@@ -514,4 +514,4 @@ def test_safety_imports_only_numpy_numba_and_the_robot_description():
         elif isinstance(node, ast.ImportFrom):
             names.add(node.module)
     third_party = {n for n in names if n.split(".")[0] not in sys.stdlib_module_names and n != "__future__"}
-    assert third_party <= {"numpy", "numba", "controllers.robot_description"}, third_party
+    assert third_party <= {"numpy", "numba", "controllers.robot_description", "controllers.layout"}, third_party
