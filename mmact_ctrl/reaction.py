@@ -76,13 +76,8 @@ def _turn_direction(t: np.ndarray, tcp_m: np.ndarray, target_m: np.ndarray, c_s:
     return d / norm if norm > 1e-6 else None
 
 
-def reaction_metrics(t_s: np.ndarray, ee_pos_m: np.ndarray, target_pos_m: np.ndarray,
-                     change_times_s: tuple[float, ...] | list[float], success_radius_m: float = 0.03,
-                     window_s: float = 1.5, vel_rate_hz: float = 100.0, threshold_m_s: float = 0.05,
-                     hold_s: float = 0.05) -> dict:
-    """Reaction and reach times after each change of the target's course (module docstring); JSON-ready."""
-    t = np.asarray(t_s, dtype=float)
-    tcp_m, target_m = np.asarray(ee_pos_m, dtype=float), np.asarray(target_pos_m, dtype=float)
+def _check_inputs(t: np.ndarray, tcp_m: np.ndarray, target_m: np.ndarray, window_s: float, vel_rate_hz: float,
+                  threshold_m_s: float, hold_s: float) -> None:
     if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
         raise ValueError(f"reaction_metrics: t_s must be >= 2 increasing times, got shape {t.shape}")
     if tcp_m.shape != (len(t), 3) or target_m.shape != (len(t), 3):
@@ -91,6 +86,30 @@ def reaction_metrics(t_s: np.ndarray, ee_pos_m: np.ndarray, target_pos_m: np.nda
     if not (window_s >= COURSE_S and vel_rate_hz > 0 and threshold_m_s > 0 and hold_s >= 0):
         raise ValueError(f"reaction_metrics: need window_s >= {COURSE_S} (got {window_s!r}), vel_rate_hz > 0 "
                          f"(got {vel_rate_hz!r}), threshold_m_s > 0 (got {threshold_m_s!r}), hold_s >= 0 (got {hold_s!r})")
+
+
+def _first_crossing(gain: np.ndarray, n: int, hold_n: int, threshold_m_s: float, grid: np.ndarray, k0: int,
+                    h: float, c: float) -> float:
+    """The time after ``c`` (s) at which ``gain`` first reaches the threshold and stays there ``hold_n`` samples
+    (interpolated between the samples around the crossing), or NaN."""
+    above = gain >= threshold_m_s
+    for j in range(n):
+        if above[j] and (j + hold_n > len(above) or above[j:j + hold_n].all()):
+            if j == 0:
+                return max(0.0, float(grid[k0]) - c)
+            frac = (threshold_m_s - gain[j - 1]) / (gain[j] - gain[j - 1])  # between j-1 (below) and j (at or above)
+            return max(0.0, float(grid[k0 + j - 1] + frac * h) - c)
+    return float("nan")
+
+
+def reaction_metrics(t_s: np.ndarray, ee_pos_m: np.ndarray, target_pos_m: np.ndarray,
+                     change_times_s: tuple[float, ...] | list[float], success_radius_m: float = 0.03,
+                     window_s: float = 1.5, vel_rate_hz: float = 100.0, threshold_m_s: float = 0.05,
+                     hold_s: float = 0.05) -> dict:
+    """Reaction and reach times after each change of the target's course (module docstring); JSON-ready."""
+    t = np.asarray(t_s, dtype=float)
+    tcp_m, target_m = np.asarray(ee_pos_m, dtype=float), np.asarray(target_pos_m, dtype=float)
+    _check_inputs(t, tcp_m, target_m, window_s, vel_rate_hz, threshold_m_s, hold_s)
     t0, t_end = float(t[0]), float(t[-1])
     h = 1.0 / vel_rate_hz
     grid = t0 + h * np.arange(int(np.floor((t_end - t0) / h + 1e-9)) + 1)
@@ -121,18 +140,7 @@ def reaction_metrics(t_s: np.ndarray, ee_pos_m: np.ndarray, target_pos_m: np.nda
         v0 = (_interp3(c, t, tcp_m) - _interp3(c - span_s, t, tcp_m)) / span_s if span_s > 0 else np.zeros(3)
         k0 = int(np.searchsorted(grid, c - 1e-9, side="left"))
         k1 = int(np.searchsorted(grid, c + window_s + 1e-9, side="right"))
-        gain = (v[k0:] - v0) @ w
-        above = gain >= threshold_m_s
-        found = float("nan")
-        for j in range(k1 - k0):
-            if above[j] and (j + hold_n > len(above) or above[j:j + hold_n].all()):
-                if j == 0:
-                    found = max(0.0, float(grid[k0]) - c)
-                else:  # the crossing between samples j-1 (below) and j (at or above)
-                    frac = (threshold_m_s - gain[j - 1]) / (gain[j] - gain[j - 1])
-                    found = max(0.0, float(grid[k0 + j - 1] + frac * h) - c)
-                break
-        reaction.append(found)
+        reaction.append(_first_crossing((v[k0:] - v0) @ w, k1 - k0, hold_n, threshold_m_s, grid, k0, h, c))
     return {
         "reaction_s": _nanmedian(reaction),
         "reach_after_change_s": _nanmedian(reach),
