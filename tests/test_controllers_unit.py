@@ -9,7 +9,7 @@ from controllers.retarget import RetargetConfig, progress, progresses, retarget_
 from controllers.robot_description import JointLimits
 from controllers.robot_model import PandaModel
 from controllers.smoother import SmootherConfig, TaskSpaceSmoother
-from controllers.target_filter import FilterConfig, TargetFilter
+from controllers.target_estimator import EstimatorConfig, TargetEstimator
 
 
 @pytest.fixture(scope="module")
@@ -89,9 +89,9 @@ def test_ruckig_output_respects_its_limits():
     assert sm.failures == 0
 
 
-def test_filter_converges_on_linear_target_and_survives_dropout():
-    cfg = FilterConfig(meas_noise_m=0.003)
-    kf = TargetFilter(cfg)
+def test_the_estimator_converges_on_a_linear_target_and_survives_dropout():
+    cfg = EstimatorConfig(meas_noise_m=0.003)
+    kf = TargetEstimator(cfg)
     rng = np.random.default_rng(0)
     v_true = np.array([0.2, -0.1, 0.05])
     p0 = np.array([0.5, 0.0, 0.3])
@@ -111,9 +111,9 @@ def test_filter_converges_on_linear_target_and_survives_dropout():
 
 
 @pytest.mark.parametrize("noise_m", [0.002, 0.0])
-def test_filter_reinitialises_on_a_jump(noise_m):
+def test_the_estimator_reinitialises_on_a_jump(noise_m):
     """A jump is followed with a noisy sensor and with a noise-free simulated one (frozen gate off)."""
-    kf = TargetFilter(FilterConfig(frozen_gate=noise_m > 0))
+    kf = TargetEstimator(EstimatorConfig(frozen_gate=noise_m > 0))
     rng = np.random.default_rng(0)
     for k in range(100):
         kf.step(k * 0.01, np.array([0.5, 0.0, 0.3]) + rng.normal(0, noise_m, 3))

@@ -8,7 +8,7 @@ import pytest
 from controllers.qp_id import TaskReference, TaskSpaceQP
 from controllers.safety import CommandLimits, SafetyMonitor
 from controllers.stop import StopTrajectory
-from controllers.target_filter import FilterConfig, TargetFilter
+from controllers.target_estimator import EstimatorConfig, TargetEstimator
 from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.config import StackConfig
@@ -141,8 +141,8 @@ def test_watchdog_stop_brakes_within_the_smoother_limits_and_holds():
     assert ctrl.stop is None
 
 
-def test_filter_gates_nonfinite_frozen_and_outlier_measurements_and_still_follows_a_jump():
-    kf = TargetFilter(FilterConfig())
+def test_the_estimator_gates_nonfinite_frozen_and_outlier_measurements_and_still_follows_a_jump():
+    kf = TargetEstimator(EstimatorConfig())
     rng = np.random.default_rng(0)
     truth = np.array([0.5, 0.1, 0.2])
     for k in range(50):
@@ -167,7 +167,7 @@ def test_filter_gates_nonfinite_frozen_and_outlier_measurements_and_still_follow
     assert np.linalg.norm(kf.pos_m - before) < 0.003 and kf.resets == 0
     # a real jump: consistent measurements at a new place re-initialise it
     new = truth + np.array([0.15, 0, 0])
-    statuses = [kf.step(1.0 + 0.01 * k, new + rng.normal(0, 0.002, 3)) for k in range(5)]
+    statuses = [kf.step(1.7 + 0.01 * k, new + rng.normal(0, 0.002, 3)) for k in range(5)]
     assert "reset" in statuses and np.linalg.norm(kf.pos_m - new) < 0.005
 
 
@@ -185,7 +185,7 @@ def test_cli_rejects_bad_safety_switches_in_one_line(bad, capsys):
 def test_an_observation_that_already_saw_a_jump_is_not_shifted_by_it_twice():
     """A chunk observed on the tick of the jump's first measurement (the filter still believes the old place)
     gets the post-jump estimate at activation; one observed before the jump keeps the old one."""
-    kf = TargetFilter(FilterConfig())
+    kf = TargetEstimator(EstimatorConfig())
     rng = np.random.default_rng(1)
     old, new = np.array([0.5, 0.0, 0.3]), np.array([0.5, 0.15, 0.3])
     for k in range(100):

@@ -1,4 +1,5 @@
-"""TargetEstimator: TargetFilter's contract, latency-aware / out-of-order fusion, and the IMM on curving motion."""
+"""TargetEstimator: the fixed-step reference filter's contract (``reference_target_filter.TargetFilter``),
+latency-aware / out-of-order fusion, the IMM on curving motion, the coordinated turn."""
 
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from filterpy.kalman import KalmanFilter
 
 from controllers.coordinated_turn import ct_extrapolate, ct_propagate
 from controllers.target_estimator import FILTER_MODELS, EstimatorConfig, TargetEstimator
-from controllers.target_filter import FilterConfig, TargetFilter
+from reference_target_filter import FilterConfig, TargetFilter
 
 P0 = np.array([0.5, 0.0, 0.3])
 
@@ -26,6 +27,33 @@ def _circle(t, radius_m=0.08, speed_m_s=0.4):
 
 def _rms_mm(errors):
     return 1000.0 * float(np.sqrt(np.mean(np.square(errors))))
+
+
+def _noisy(truth, rng, n, noise_m=0.002, dropout=0.0, blackout=(0, 0)):
+    """The 100 Hz stream ``(t, z)`` of ``truth`` plus Gaussian noise (``noise_m``, m): None during the ``blackout``
+    sample range and, at random, with probability ``dropout``."""
+    for k in range(n):
+        t = 0.01 * k
+        if blackout[0] <= k < blackout[1] or (dropout and rng.random() < dropout):
+            yield t, None
+        else:
+            yield t, truth(t) + rng.normal(0, noise_m, 3)
+
+
+class _Lockstep:
+    """The estimator and, for model cv, the fixed-step reference filter beside it on the same stream: every
+    ``step`` returns the estimator's status, which must be the reference's."""
+
+    def __init__(self, model="cv"):
+        self.est = TargetEstimator(EstimatorConfig(model=model))
+        self.ref = TargetFilter(FilterConfig()) if model == "cv" else None
+
+    def step(self, t, z):
+        status = self.est.step(t, z)
+        if self.ref is not None:
+            ref_status = self.ref.step(t, z)
+            assert ref_status == status, (t, ref_status, status)
+        return status
 
 
 # ---- config ---------------------------------------------------------------------------------
@@ -86,11 +114,11 @@ def test_step_reproduces_target_filter_cv_with_the_same_gates(seed):
     """Zero latency, model cv: every status, counter, prediction and state equals TargetFilter's (1e-9), through
     dropouts, gated measurements (the gap is propagated in dt steps, as TargetFilter's per-tick predicts) and a
     jump."""
-    tf, te = TargetFilter(FilterConfig()), TargetEstimator(EstimatorConfig())
+    pair = _Lockstep("cv")
+    tf, te = pair.ref, pair.est
     statuses = []
     for t, z in _messy_linear_stream(seed):
-        s_tf, s_te = tf.step(t, z), te.step(t, z)
-        assert s_tf == s_te, (t, s_tf, s_te)
+        s_tf = s_te = pair.step(t, z)
         statuses.append(s_te)
         if tf.initialized:
             times = t + np.array([0.0, 0.01, 0.2, 0.5])
@@ -111,11 +139,8 @@ def test_a_blackout_past_coast_s_drops_the_motion_like_target_filter():
     """TargetFilter drops the velocity at the first tick past coast_s, the estimator at t_s + coast_s exactly:
     the held positions differ by at most one period of motion."""
     tf, te = TargetFilter(FilterConfig()), TargetEstimator(EstimatorConfig())
-    rng = np.random.default_rng(0)
     v = np.array([0.2, -0.1, 0.05])
-    for k in range(200):
-        t = 0.01 * k
-        z = None if 100 <= k < 170 else _line(t) + rng.normal(0, 0.002, 3)
+    for k, (t, z) in enumerate(_noisy(_line, np.random.default_rng(0), 200, blackout=(100, 170))):
         tf.step(t, z), te.step(t, z)
         if k == 165:  # 0.65 s blind: both coast
             assert te.coasts == tf.coasts == 1 and np.all(te.vel_m_s == 0)
@@ -161,9 +186,8 @@ def _latency_run(cfg, seed, latency_steps=10, n=400):
     """Linear 0.2 m/s target, 100 Hz, each measurement arrives latency_steps periods after its capture. Errors (m)
     of the estimate predicted to now: undelayed stream, latency-aware (capture-stamped), naive (stamped now)."""
     undelayed, aware, naive = TargetEstimator(cfg), TargetEstimator(cfg), TargetEstimator(cfg)
-    rng = np.random.default_rng(seed)
     truth = lambda t: _line(t, v=(0.2, 0.0, 0.0))  # noqa: E731
-    zs = [truth(0.01 * k) + rng.normal(0, cfg.meas_noise_m, 3) for k in range(n)]
+    zs = [z for _, z in _noisy(truth, np.random.default_rng(seed), n, noise_m=cfg.meas_noise_m)]
     errs = {"undelayed": [], "aware": [], "naive": []}
     for k in range(n):
         now = 0.01 * k
@@ -223,8 +247,8 @@ def test_arrival_shuffled_within_50_ms_gives_the_in_order_estimate(model):
 def test_a_measurement_older_than_history_s_is_dropped_and_counted(model):
     est = TargetEstimator(EstimatorConfig(model=model, history_s=0.5))
     rng = np.random.default_rng(0)
-    for k in range(100):
-        est.fuse(0.01 * k, _line(0.01 * k) + rng.normal(0, 0.002, 3))
+    for t, z in _noisy(_line, rng, 100):
+        est.fuse(t, z)
     before = (est.pos_m, est.vel_m_s, est.predict_pos(1.2), est.fused)
     assert est.fuse(0.99 - 0.6, _line(0.39)) == "dropped"
     assert est.dropped_old == 1 and est.reordered == 0
@@ -241,31 +265,36 @@ def test_a_measurement_older_than_history_s_is_dropped_and_counted(model):
 
 
 # ---- curving motion: CV vs CA vs IMM -------------------------------------------------------------------
-def _prediction_errors(cfg, truth, seeds=(0, 1), n=600, skip=100):
-    """RMS (mm) of the estimate at the capture time, one step (10 ms) ahead before the next measurement is fused,
-    and 200 ms ahead; mean IMM p(ca)."""
-    e0, e1, e20, p_ca = [], [], [], []
+def _errors_ahead(model, truth, taus_s, seeds=(0, 1), n=500, skip=100, dropout=0.0):
+    """100 Hz, 2 mm noise (and ``dropout``), after each measurement past ``skip``: the errors (m) of the estimate at
+    the capture time (N,) and of the predictions ``taus_s`` ahead (N, len(taus_s)); the mean mode probabilities."""
+    at, ahead, probs = [], [], []
+    taus = np.asarray(taus_s)
     for seed in seeds:
-        est, rng = TargetEstimator(cfg), np.random.default_rng(seed)
-        for k in range(n):
-            t = 0.01 * k
+        est = TargetEstimator(EstimatorConfig(model=model))
+        for k, (t, z) in enumerate(_noisy(truth, np.random.default_rng(seed), n, dropout=dropout)):
+            est.fuse(t, z)
             if k > skip:
-                e1.append(np.linalg.norm(est.predict_pos(t) - truth(t)))
-            est.fuse(t, truth(t) + rng.normal(0, 0.002, 3))
-            if k > skip:
-                e0.append(np.linalg.norm(est.pos_m - truth(t)))
-                e20.append(np.linalg.norm(est.predict_pos(t + 0.2) - truth(t + 0.2)))
+                at.append(np.linalg.norm(est.pos_m - truth(t)))
+                truth_ahead = np.array([truth(t + tau) for tau in taus])
+                ahead.append(np.linalg.norm(est.predict_pos_many(t + taus) - truth_ahead, axis=1))
                 if est.mode_probs is not None:
-                    p_ca.append(est.mode_probs[1])
-    return _rms_mm(e0), _rms_mm(e1), _rms_mm(e20), (float(np.mean(p_ca)) if p_ca else None)
+                    probs.append(est.mode_probs)
+    return np.array(at), np.array(ahead), (np.mean(probs, axis=0) if probs else None)
+
+
+def _prediction_errors(model, truth):
+    """RMS (mm) of the estimate at the capture time, 10 ms (one step) and 200 ms ahead; mean IMM p(ca)."""
+    at, ahead, probs = _errors_ahead(model, truth, (0.01, 0.2), n=600)
+    return _rms_mm(at), _rms_mm(ahead[:, 0]), _rms_mm(ahead[:, 1]), (None if probs is None else float(probs[1]))
 
 
 def test_imm_predicts_a_circle_better_than_cv_and_a_line_no_worse():
     """Measured (2 seeds x 5 s, 2 mm noise, 100 Hz), RMS mm at 0 / 10 / 200 ms ahead:
     circle r 0.08 m, 0.4 m/s: cv 2.5 / 3.3 / 56, ca 2.1 / 2.6 / 42, imm 2.1 / 2.6 / 41 (p(ca) ~0.9);
     line 0.23 m/s:           cv 1.9 / 2.2 / 8.9, ca 1.9 / 2.3 / 18, imm 1.4 / 1.5 / 4.5 (p(ca) ~0.1)."""
-    cv_c, ca_c, imm_c = (_prediction_errors(EstimatorConfig(model=m), _circle) for m in ("cv", "ca", "imm"))
-    cv_l, ca_l, imm_l = (_prediction_errors(EstimatorConfig(model=m), _line) for m in ("cv", "ca", "imm"))
+    cv_c, ca_c, imm_c = (_prediction_errors(m, _circle) for m in ("cv", "ca", "imm"))
+    cv_l, ca_l, imm_l = (_prediction_errors(m, _line) for m in ("cv", "ca", "imm"))
     # circle: one-step and 200 ms-ahead clearly below CV (and the estimate at the capture time)
     assert imm_c[1] < 0.85 * cv_c[1] and imm_c[2] < 0.85 * cv_c[2] and imm_c[0] < cv_c[0], (cv_c, imm_c)
     assert ca_c[1] < 0.85 * cv_c[1] and ca_c[2] < 0.85 * cv_c[2], (cv_c, ca_c)
@@ -279,17 +308,12 @@ def test_imm_predicts_a_circle_better_than_cv_and_a_line_no_worse():
 # ---- gates -----------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("model", FILTER_MODELS)
 def test_gates_nonfinite_frozen_and_outlier_and_a_15_cm_jump_reinitialises(model):
-    """TargetFilter's gate test, for every model; with cv the statuses are also TargetFilter's, one by one."""
-    est = TargetEstimator(EstimatorConfig(model=model))
-    ref = TargetFilter(FilterConfig()) if model == "cv" else None
+    """The reference filter's gate test, for every model; with cv the statuses are also the reference's, one by
+    one."""
+    pair = _Lockstep(model)
+    est, step = pair.est, pair.step
     rng = np.random.default_rng(0)
     truth = np.array([0.5, 0.1, 0.2])
-
-    def step(t, z):
-        status = est.step(t, z)
-        if ref is not None:
-            assert ref.step(t, z) == status
-        return status
 
     for k in range(50):
         step(0.01 * k, truth + rng.normal(0, 0.002, 3))
@@ -341,23 +365,35 @@ def test_before_the_first_measurement_and_prediction_shapes():
     np.testing.assert_allclose(est3.predict_pos_many(times), [est3.predict_pos(t) for t in times], atol=1e-15)
 
 
-def test_imm_with_irregular_stamps_and_a_dropout():
-    """The IMM's Markov matrix is per dt_s: a shorter or longer step uses its fractional power (M^0.5 M^0.5 = M);
-    jittered stamps and a 0.2 s dropout (sub-stepped) keep it on a circle."""
-    est = TargetEstimator(EstimatorConfig(model="imm"))
-    half = est._model._mats(0.005)[4]
-    np.testing.assert_allclose(half @ half, np.asarray(est.config.imm_transition), atol=1e-12)
-    np.testing.assert_allclose(est._model._mats(0.0)[4], np.eye(2), atol=1e-12)
-    rng = np.random.default_rng(5)
-    t, errs = 0.0, []
-    while t < 4.0:
+def _jittered_circle(seed=5, until_s=4.0, gap_s=(2.0, 2.2)):
+    """Capture times 5-15 ms apart (uniform) with no measurement in ``gap_s``, and noisy (2 mm) circle positions."""
+    rng = np.random.default_rng(seed)
+    t = 0.0
+    while t < until_s:
         t += rng.uniform(0.005, 0.015)
-        if 2.0 <= t < 2.2:
-            continue
-        assert est.fuse(t, _circle(t) + rng.normal(0, 0.002, 3)) in ("init", "fused")
+        if not gap_s[0] <= t < gap_s[1]:
+            yield t, _circle(t) + rng.normal(0, 0.002, 3)
+
+
+@pytest.mark.parametrize("model, markov_at, per_dt, ahead_s, max_rms_mm", [
+    ("imm", 4, ((0.99, 0.01), (0.01, 0.99)), 0.01, 4.0),
+    ("imm-ct", 1, ((0.99, 0.005, 0.005), (0.005, 0.99, 0.005), (0.005, 0.005, 0.99)), 0.2, 8.0),
+])
+def test_imms_with_irregular_stamps_and_a_dropout(model, markov_at, per_dt, ahead_s, max_rms_mm):
+    """The IMMs' Markov matrix is per dt_s: a shorter or longer step uses its fractional power (M^0.5 M^0.5 = M);
+    jittered stamps and a 0.2 s dropout (sub-stepped) keep them on a circle."""
+    est = TargetEstimator(EstimatorConfig(model=model))
+    markov = lambda h: est._model._mats(h)[markov_at]  # noqa: E731
+    half, full = markov(0.005), markov(0.01)
+    np.testing.assert_allclose(half @ half, full, atol=1e-12)
+    np.testing.assert_allclose(full, per_dt, atol=1e-12)
+    np.testing.assert_allclose(markov(0.0), np.eye(len(per_dt)), atol=1e-12)
+    errs = []
+    for t, z in _jittered_circle():
+        assert est.fuse(t, z) in ("init", "fused")
         if t > 1.0:
-            errs.append(np.linalg.norm(est.predict_pos(t + 0.01) - _circle(t + 0.01)))
-    assert _rms_mm(errs) < 4.0 and abs(est.mode_probs.sum() - 1.0) < 1e-12
+            errs.append(np.linalg.norm(est.predict_pos(t + ahead_s) - _circle(t + ahead_s)))
+    assert _rms_mm(errs) < max_rms_mm and abs(est.mode_probs.sum() - 1.0) < 1e-12
 
 
 def test_filtered_at_a_past_time_uses_only_what_was_captured_by_then():
@@ -437,21 +473,11 @@ def test_ct_jacobian_and_extrapolation_agree_with_the_model():
     np.testing.assert_allclose(pos, circle, atol=1e-12)
 
 
-def _ahead_errors(model, truth, taus=(0.1, 0.2, 0.4), seeds=(0, 1), n=500, skip=100):
-    """Mean error (mm) of the prediction ``taus`` ahead, 100 Hz, 2 mm noise, 10 % dropout; mean mode probabilities."""
-    errs, probs = [], []
-    taus = np.asarray(taus)
-    for seed in seeds:
-        est, rng = TargetEstimator(EstimatorConfig(model=model)), np.random.default_rng(seed)
-        for k in range(n):
-            t = 0.01 * k
-            est.fuse(t, None if rng.random() < 0.1 else truth(t) + rng.normal(0, 0.002, 3))
-            if k > skip:
-                truth_ahead = np.array([truth(t + tau) for tau in taus])
-                errs.append(np.linalg.norm(est.predict_pos_many(t + taus) - truth_ahead, axis=1))
-                if est.mode_probs is not None:
-                    probs.append(est.mode_probs)
-    return 1000.0 * np.mean(errs, axis=0), (np.mean(probs, axis=0) if probs else None)
+def _ahead_errors(model, truth):
+    """Mean error (mm) of the prediction 0.1 / 0.2 / 0.4 s ahead, 100 Hz, 2 mm noise, 10 % dropout; mean mode
+    probabilities."""
+    _, ahead, probs = _errors_ahead(model, truth, (0.1, 0.2, 0.4), dropout=0.1)
+    return 1000.0 * ahead.mean(axis=0), probs
 
 
 def test_coordinated_turn_predicts_a_circle_far_better_than_cv_ca_and_imm():
@@ -472,36 +498,16 @@ def test_coordinated_turn_predicts_a_circle_far_better_than_cv_ca_and_imm():
     assert np.all(line["imm-ct"][0] < line["cv"][0]), (line["imm-ct"][0], line["cv"][0])
 
 
-def test_imm_ct_with_irregular_stamps_and_a_dropout():
-    est = TargetEstimator(EstimatorConfig(model="imm-ct"))
-    half = est._model._mats(0.005)[1]
-    full = est._model._mats(0.01)[1]
-    np.testing.assert_allclose(half @ half, full, atol=1e-12)
-    np.testing.assert_allclose(np.diag(full), [0.99] * 3, atol=1e-12)
-    np.testing.assert_allclose(est._model._mats(0.0)[1], np.eye(3), atol=1e-12)
-    rng = np.random.default_rng(5)
-    t, errs = 0.0, []
-    while t < 4.0:
-        t += rng.uniform(0.005, 0.015)
-        if 2.0 <= t < 2.2:
-            continue
-        assert est.fuse(t, _circle(t) + rng.normal(0, 0.002, 3)) in ("init", "fused")
-        if t > 1.0:
-            errs.append(np.linalg.norm(est.predict_pos(t + 0.2) - _circle(t + 0.2)))
-    assert _rms_mm(errs) < 8.0 and abs(est.mode_probs.sum() - 1.0) < 1e-12
-
-
 @pytest.mark.parametrize("model", ["ct", "imm-ct"])
 def test_turn_models_win_the_circle_back_after_a_coast(model):
     """A 0.7 s blackout (past coast_s: the motion estimate is dropped) forgets the turn rate with its initial
     uncertainty, so the CT mode re-learns it. Mean 0.2 s-ahead error from 0.4 s after the target reappears to 1.3 s:
     ct 2.6, imm-ct 4.1 mm (imm 22.9); with the converged omega covariance kept, as the cv / ca / imm models keep
     theirs, ct 8.8 and imm-ct 22.9 mm."""
-    est, rng = TargetEstimator(EstimatorConfig(model=model)), np.random.default_rng(2)
+    est = TargetEstimator(EstimatorConfig(model=model))
     errs = []
-    for k in range(400):
-        t = 0.01 * k
-        est.fuse(t, None if 200 <= k < 270 else _circle(t) + rng.normal(0, 0.002, 3))
+    for k, (t, z) in enumerate(_noisy(_circle, np.random.default_rng(2), 400, blackout=(200, 270))):
+        est.fuse(t, z)
         if 310 <= k:
             errs.append(np.linalg.norm(est.predict_pos(t + 0.2) - _circle(t + 0.2)))
     assert est.coasts == 1
