@@ -228,8 +228,17 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     spec.compiler.fusestatic = False
     spec.compiler.discardvisual = False
     spec.modelname = "panda_scene"
+    _physics_and_rendering(spec, config)
+    _arm_actuators(spec, config)
+    _gripper(spec, config)
+    _robot_looks(spec)
+    _environment(spec.worldbody, spec)
+    _targets_and_cameras(spec.worldbody, config)
+    return spec
 
-    # physics
+
+def _physics_and_rendering(spec: mujoco.MjSpec, config: SceneConfig) -> None:
+    """The time step and integrator, the offscreen buffer and its rendering quality."""
     spec.option.timestep = config.dt_s
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.visual.global_.offwidth = max(640, int(config.image_size_px))
@@ -240,6 +249,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
 
+
+
+def _arm_actuators(spec: mujoco.MjSpec, config: SceneConfig) -> None:
+    """One torque motor per arm joint, limited to the Panda's effort; the armature the controller's model has."""
     limits = JointLimits()
     for name, armature, tau_max in zip(ARM_JOINTS, config.armature_kgm2, limits.tau_max_nm):
         spec.joint(name).armature = float(armature)
@@ -250,7 +263,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.ctrlrange = [-tau_max, tau_max]
 
-    # gripper: tendon = finger1 + finger2 (total opening), one position actuator on it
+
+
+def _gripper(spec: mujoco.MjSpec, config: SceneConfig) -> None:
+    """The gripper: a tendon over both fingers (the total opening) with one position actuator on it."""
     tendon = spec.add_tendon(name=GRIPPER_TENDON)
     for finger in FINGER_JOINTS:
         tendon.wrap_joint(finger, 1.0)
@@ -262,7 +278,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     grip.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
     grip.forcerange = [-100.0, 100.0]
 
-    # robot appearance and collision bits
+
+
+def _robot_looks(spec: mujoco.MjSpec) -> None:
+    """The robot's collision bits and colours, and the TCP site."""
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = _ROBOT_CONTYPE, _ROBOT_CONAFFINITY
         geom.rgba = [0.92, 0.92, 0.92, 1.0]
@@ -274,7 +293,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     tcp_pos, tcp_quat = fixed_frame_pose(HAND_BODY, TCP_FRAME)
     spec.body(HAND_BODY).add_site(name=TCP_SITE, pos=tcp_pos, quat=tcp_quat, size=[0.006, 0, 0], rgba=[0.1, 0.8, 0.1, 0.6], group=3)
 
-    world = spec.worldbody
+
+
+def _environment(world, spec: mujoco.MjSpec) -> None:
+    """Sky, floor, the table (its top is the plane z = 0) and the lights."""
     # environment
     spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
                      rgb1=[0.55, 0.62, 0.7], rgb2=[0.12, 0.14, 0.18], width=128, height=768)
@@ -293,6 +315,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     world.add_light(name="key", pos=[0.5, -0.5, 2.0], dir=[-0.1, 0.3, -1.0], diffuse=[0.6, 0.6, 0.6], castshadow=True)
     world.add_light(name="fill", pos=[1.5, 1.0, 1.5], dir=[-1.0, -0.7, -0.8], diffuse=[0.3, 0.3, 0.3], castshadow=False)
 
+
+
+def _targets_and_cameras(world, config: SceneConfig) -> None:
+    """The mocap target spheres (no collision) and the cameras."""
     # mocap targets (no collision)
     for i in range(config.n_objects):
         body = world.add_body(name=TARGET_BODIES[i], mocap=True, pos=[0.5, -0.1 + 0.2 * i, 0.3])
@@ -302,7 +328,6 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     # cameras
     for name, (pos, look_at, fovy) in _CAMERAS.items():
         world.add_camera(name=name, pos=list(pos), quat=_look_at_quat(np.array(pos), np.array(look_at)), fovy=fovy)
-    return spec
 
 
 def build_panda_model(config: SceneConfig = SceneConfig()) -> mujoco.MjModel:
