@@ -63,7 +63,7 @@ class PolicyBundle:
             raise ValueError(f"text tokenizer has {self.text_tokenizer.vocab_size} ids > text_size {model_cfg.text_size}")
         self.model_cfg = model_cfg
         self.model = model if model is not None else MMActModel(model_cfg)
-        self.model.cfg = model_cfg  # a layout switch (policy.train.set_layout) keeps the weights
+        self.model.cfg = model_cfg  # a layout switch (policy.training.stage12_setup.set_layout) keeps the weights
         self._builder = None
         return self.model
 

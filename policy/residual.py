@@ -3,7 +3,8 @@
 At the perception rate (100 Hz) it sees the base waypoint the open-loop chunk asks for now, how old the chunk's
 observation is, the latest target measurement(s) of the 100 Hz channel and the TCP state, and answers a bounded
 task-space position correction; the 1 kHz QP tracks ``base waypoint + correction``. The run-time executor lives in
-``mmact_ctrl.executors.residual``; the data and the training command in ``scenarios.train_residual``.
+``mmact_ctrl.executors.residual``; its training loop (from arrays) in ``policy.residual_training``; the data (open-loop
+rollouts) and the training command in ``scenarios.train_residual``.
 
 The features (:func:`residual_features`, ``FEATURE_DIM`` = 17, all dimensionless, in this order):
 

@@ -1,7 +1,7 @@
 """A dataset's tokens, cached in one file, so stage 1/2 can train where the frames are not.
 
-Stage 1/2 never look at pixels: ``policy.train.load_tokenized`` turns every frame into VQ-VAE codes and every
-string and float into token ids before the first step. The cache is that dict of token arrays, written once
+Stage 1/2 never look at pixels: ``policy.training.tokenize.load_tokenized`` turns every frame into VQ-VAE codes and
+every string and float into token ids before the first step. The cache is that dict of token arrays, written once
 (``np.savez_compressed``, no pickles) with the dataset's ``meta.json`` and a fingerprint of the tokenizers that made
 it. 12,000 two-camera two-frame samples are 431 MB of frames and about 20 MB of tokens: small enough to carry to an
 accelerator machine that has torch but neither the frames nor MuJoCo (``docs/policy3d/device_train.sh``).
@@ -31,7 +31,7 @@ from policy.checkpoint import cpu_state, tokenizer_dict, weights_digest
 
 FORMAT = "mmact-ctrl/token-cache"
 FORMAT_VERSION = 2  # 2 (issue 25): + ball (the detector's ball tokens per view) and target_prev_pos_m
-#: the arrays ``policy.train.load_tokenized`` returns (and the cache must hold)
+#: the arrays ``policy.training.tokenize.load_tokenized`` returns (and the cache must hold)
 FIELDS = ("img", "fut", "instr", "quest", "answer", "answer_str", "state", "action", "actions_f", "target_pos_m", "source",
           "ball", "target_prev_pos_m")
 
@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> Path:
     from policy.bundle import PolicyBundle
     from policy.checkpoint import CheckpointError
     from policy.dataset import DatasetError, read_metas
-    from policy.train import check_data_matches, load_tokenized
+    from policy.training.tokenize import check_data_matches, load_tokenized
 
     try:
         meta = read_metas(args.data)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
-import math
 import shlex
 import sys
 import time
@@ -29,8 +28,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from policy.residual import DEFAULT_RESIDUAL_CHECKPOINT, FEATURE_DIM, POS_SCALE_M, ResidualConfig, ResidualPolicy, \
-    residual_features
+from policy.residual import DEFAULT_RESIDUAL_CHECKPOINT, FEATURE_DIM, ResidualConfig, residual_features
+from policy.residual_training import clip_norm, train
 
 PROG = "python -m scenarios.train_residual"
 #: the first training seed: evaluation (the CLI, the sweep) uses seeds 0..999.
@@ -193,22 +192,41 @@ def rollout_samples(spec: EpisodeSpec, duration_s: float = 6.0, latency_ms: floa
     log = run_episode(world, rec, controller, seed=spec.seed, sensor=sensor)
     wall = time.perf_counter() - w0
     dt = cfg.dt_s
-    n = len(log.t_s)
-    every = int(round(1.0 / (SAMPLE_HZ * dt)))
     lead_k = int(round(lead_s / dt))
-    latency_s = latency_ms / 1000.0
-    # the chunks that became active, each matched to the chunk observed `latency` before (rejected ones never are)
-    obs_times = np.array([c[0] for c in rec.chunks]) if rec.chunks else np.zeros(0)
-    active = []
-    for t_act in log.chunk_active_s:
-        j = int(np.argmin(np.abs(obs_times - (t_act - latency_s)))) if len(obs_times) else -1
-        if j >= 0 and abs(obs_times[j] - (t_act - latency_s)) < 0.5 * dt:
-            t0, horizon, cdt = rec.chunks[j]
-            active.append((t_act, t0, horizon * cdt, t0 + horizon * cdt))
+    active = _active_chunks(rec.chunks, log.chunk_active_s, latency_ms / 1000.0, dt)
     # the measurement channel: capture times and positions of the measurements that were not dropped
     caps = [(t, p) for t, p in sensor.record if p is not None]
     cap_t = np.array([c[0] for c in caps]) if caps else np.zeros(0)
     cap_p = np.array([c[1] for c in caps]).reshape(-1, 3)
+    rows = _sample_rows(len(log.t_s), dt, lead_k, active, cap_t, history_s)
+    if not rows:
+        return {"features": np.zeros((0, FEATURE_DIM), np.float32), **{key: np.zeros((0, 3), np.float32) for key in
+                ("label", "base", "target", "target_lead")}, "t": np.zeros(0, np.float32),
+                "info": {**asdict(spec), "n": 0, "wall_s": wall}}
+    out = _samples(log, rows, cap_t, cap_p, dt, lead_k, max_correction_m)
+    out["info"] = {**asdict(spec), "n": int(len(out["t"])), "wall_s": wall, "rejections": sum(log.rejections.values())}
+    return out
+
+
+def _active_chunks(chunks: list[tuple[float, int, float]], chunk_active_s, latency_s: float,
+                   dt: float) -> list[tuple[float, float, float, float]]:
+    """The chunks that became active (at the times ``chunk_active_s``), each matched to the chunk observed
+    ``latency_s`` before (rejected ones never are): ``(t active, t observed, span, t of its last waypoint)`` s."""
+    obs_times = np.array([c[0] for c in chunks]) if chunks else np.zeros(0)
+    active = []
+    for t_act in chunk_active_s:
+        j = int(np.argmin(np.abs(obs_times - (t_act - latency_s)))) if len(obs_times) else -1
+        if j >= 0 and abs(obs_times[j] - (t_act - latency_s)) < 0.5 * dt:
+            t0, horizon, cdt = chunks[j]
+            active.append((t_act, t0, horizon * cdt, t0 + horizon * cdt))
+    return active
+
+
+def _sample_rows(n: int, dt: float, lead_k: int, active: list, cap_t: np.ndarray,
+                 history_s: float) -> list[tuple[int, float, float, int, int]]:
+    """The ticks sampled at ``SAMPLE_HZ`` while a chunk is executing and a measurement exists:
+    ``(tick, age of the chunk's observation s, chunk span s, index of the latest measurement, of the earlier one)``."""
+    every = int(round(1.0 / (SAMPLE_HZ * dt)))
     rows = []
     for k in range(every, n - lead_k, every):
         t = k * dt
@@ -224,10 +242,12 @@ def rollout_samples(spec: EpisodeSpec, duration_s: float = 6.0, latency_ms: floa
         i_prev = int(np.searchsorted(cap_t, t - history_s + 0.5 * dt, side="right")) - 1
         i_prev = i_last if i_prev < 0 else i_prev
         rows.append((k, t - t0, span, i_last, i_prev))
-    if not rows:
-        return {"features": np.zeros((0, FEATURE_DIM), np.float32), **{key: np.zeros((0, 3), np.float32) for key in
-                ("label", "base", "target", "target_lead")}, "t": np.zeros(0, np.float32),
-                "info": {**asdict(spec), "n": 0, "wall_s": wall}}
+    return rows
+
+
+def _samples(log, rows: list, cap_t: np.ndarray, cap_p: np.ndarray, dt: float, lead_k: int,
+             max_correction_m: float) -> dict:
+    """The sample arrays (features, label, base, target, target_lead, t) of the episode ``log`` at ``rows``."""
     k = np.array([r[0] for r in rows])
     age = np.array([r[1] for r in rows])
     span = np.array([r[2] for r in rows])
@@ -243,15 +263,7 @@ def rollout_samples(spec: EpisodeSpec, duration_s: float = 6.0, latency_ms: floa
     label = clip_norm(target_lead - base, max_correction_m)
     return {"features": feats.astype(np.float32), "label": label.astype(np.float32), "base": base.astype(np.float32),
             "target": target.astype(np.float32), "target_lead": target_lead.astype(np.float32),
-            "t": (k * dt).astype(np.float32),
-            "info": {**asdict(spec), "n": int(len(k)), "wall_s": wall, "rejections": sum(log.rejections.values())}}
-
-
-def clip_norm(v: np.ndarray, max_norm: float) -> np.ndarray:
-    """``v`` (..., 3) scaled down to norm ``max_norm`` where longer."""
-    v = np.asarray(v, dtype=np.float64)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v * np.minimum(1.0, max_norm / np.maximum(n, 1e-12))
+            "t": (k * dt).astype(np.float32)}
 
 
 def _worker(args):
@@ -295,141 +307,6 @@ def collect_samples(specs: list[EpisodeSpec], duration_s: float = 6.0, latency_m
     return out
 
 
-# ---------------------------------------------------------------- training
-def split_episodes(episode: np.ndarray, val_fraction: float, seed: int = 1234) -> tuple[np.ndarray, np.ndarray]:
-    """Sample indices (train, val), split by episode (a seeded share ``val_fraction`` of the episodes is held out)."""
-    ids = np.unique(episode)
-    rng = np.random.default_rng(seed)
-    n_val = int(round(val_fraction * len(ids))) if len(ids) > 1 else 0
-    n_val = min(max(n_val, 1 if val_fraction > 0 and len(ids) > 1 else 0), len(ids) - 1)
-    val_ids = rng.permutation(ids)[:n_val]
-    is_val = np.isin(episode, val_ids)
-    return np.flatnonzero(~is_val), np.flatnonzero(is_val)
-
-
-def _tcp_shift(x: torch.Tensor, y: torch.Tensor, prob: float, gen: torch.Generator) -> torch.Tensor:
-    """Augmentation against the closed loop's state shift: a share ``prob`` of the samples sees the TCP moved
-    toward where the corrected reference would have taken it (a random fraction of the label): the features
-    ``meas - tcp`` shift by that much, so the network cannot read the label off the TCP's lag behind the target."""
-    if prob <= 0:
-        return x
-    b = x.shape[0]
-    u = torch.rand(b, 1, generator=gen) * (torch.rand(b, 1, generator=gen) < prob)
-    x = x.clone()
-    x[:, 3:6] -= u * y / POS_SCALE_M
-    return x
-
-
-def evaluate(policy: ResidualPolicy, data: dict, idx: np.ndarray) -> dict:
-    """Errors (mm) of the corrected waypoint ``base + correction`` and of the base waypoint against the target (now
-    and at the label's lead), and the best a bounded correction could do (the label itself)."""
-    if len(idx) == 0:
-        return {}
-    corr = policy.correction_m(data["features"][idx].astype(np.float64))
-    base = data["base"][idx].astype(np.float64)
-    label = data["label"][idx].astype(np.float64)
-    out = {"n": int(len(idx))}
-    for name, tgt in (("now", data["target"][idx]), ("lead", data["target_lead"][idx])):
-        tgt = tgt.astype(np.float64)
-        out[f"base_err_{name}_mm"] = float(np.linalg.norm(base - tgt, axis=1).mean() * 1e3)
-        out[f"corrected_err_{name}_mm"] = float(np.linalg.norm(base + corr - tgt, axis=1).mean() * 1e3)
-        out[f"bounded_label_err_{name}_mm"] = float(np.linalg.norm(base + label - tgt, axis=1).mean() * 1e3)
-    out["correction_vs_label_rmse_mm"] = float(np.sqrt(np.mean(np.sum((corr - label) ** 2, axis=1))) * 1e3)
-    # where the bound does not bite, the error measures the network's precision alone
-    tgt = data["target_lead"][idx].astype(np.float64)
-    free = np.linalg.norm(tgt - base, axis=1) < policy.config.max_correction_m
-    out["share_within_bound"] = float(free.mean())
-    if free.any():
-        out["base_err_within_bound_mm"] = float(np.linalg.norm(base - tgt, axis=1)[free].mean() * 1e3)
-        out["corrected_err_within_bound_mm"] = float(np.linalg.norm(base + corr - tgt, axis=1)[free].mean() * 1e3)
-    return out
-
-
-def train(data: dict, config: ResidualConfig = ResidualConfig(), epochs: int = 30, batch_size: int = 512,
-          lr: float = 2e-3, weight_decay: float = 1e-4, val_fraction: float = 0.15, seed: int = 0,
-          tcp_shift_prob: float = 0.5, progress: bool = True, policy: ResidualPolicy | None = None
-          ) -> tuple[ResidualPolicy, dict]:
-    """Fit a :class:`ResidualPolicy` to ``data`` (:func:`collect_samples`' output) with AdamW + MSE.
-
-    The loss is the mean squared error of the correction in units of ``config.max_correction_m`` (so 1e-2 is
-    an RMS error of 10 % of the bound). The learning rate decays with a cosine to 5 % over ``epochs``. The
-    validation split holds out whole episodes. Returns the policy and ``info`` with the per-epoch history
-    (``train_loss``: mean over the epoch's batches, ``val_loss``: over the whole held-out split), the final
-    figures and the val / train errors of :func:`evaluate`.
-    """
-    if epochs < 1 or batch_size < 1 or not lr > 0:
-        raise ValueError(f"train: epochs and batch_size must be >= 1 and lr > 0, got {epochs}, {batch_size}, {lr}")
-    policy = policy or ResidualPolicy(config, seed=seed)
-    config = policy.config
-    net = policy.torch_module()
-    tr, va = split_episodes(data["episode"], val_fraction)
-    if len(tr) == 0:
-        raise ValueError("train: no training samples")
-    scale = 1.0 / config.max_correction_m
-    x_all = torch.as_tensor(data["features"], dtype=torch.float32)
-    y_all = torch.as_tensor(data["label"], dtype=torch.float32) * scale
-    x_tr, y_tr = x_all[tr], y_all[tr]
-    gen = torch.Generator().manual_seed(int(seed))
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
-    steps_per_epoch = max(1, math.ceil(len(tr) / batch_size))
-    total = epochs * steps_per_epoch
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(s, total) / total)))
-
-    def val_loss() -> float:
-        if len(va) == 0:
-            return float("nan")
-        net.eval()
-        with torch.no_grad():
-            loss = sum(float(((net(x_all[va[i:i + 65536]]) * scale - y_all[va[i:i + 65536]]) ** 2).mean(-1).sum())
-                       for i in range(0, len(va), 65536))
-        return loss / len(va)
-
-    history = []
-    t0 = time.perf_counter()
-    bar = tqdm(range(epochs), desc="training", unit="epoch", disable=not progress, file=sys.stderr)
-    for epoch in bar:
-        net.train()
-        perm = torch.randperm(len(tr), generator=gen)
-        run, count = 0.0, 0
-        for i in range(0, len(tr), batch_size):
-            b = perm[i:i + batch_size]
-            x, y = _tcp_shift(x_tr[b], y_tr[b], tcp_shift_prob, gen), y_tr[b]
-            loss = ((net(x) * scale - y) ** 2).mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
-            opt.step()
-            sched.step()
-            run += loss.item() * len(b)
-            count += len(b)
-        history.append({"epoch": epoch, "train_loss": run / count, "val_loss": val_loss()})
-        bar.set_postfix(train=f"{history[-1]['train_loss']:.2e}", val=f"{history[-1]['val_loss']:.2e}")
-    bar.close()
-    net.eval()
-    wall = time.perf_counter() - t0
-    info = {
-        "epochs": epochs, "steps": total, "batch_size": batch_size, "lr": lr, "weight_decay": weight_decay,
-        "tcp_shift_prob": tcp_shift_prob, "seed": seed, "val_fraction": val_fraction,
-        "n_samples": int(len(data["label"])), "n_train": int(len(tr)), "n_val": int(len(va)),
-        "n_episodes_train": int(len(np.unique(data["episode"][tr]))),
-        "n_episodes_val": int(len(np.unique(data["episode"][va]))) if len(va) else 0,
-        "history": history, "final_train_loss": history[-1]["train_loss"], "final_val_loss": history[-1]["val_loss"],
-        "train_wall_s": wall, "n_params": policy.n_params,
-        "val": evaluate(policy, data, va), "train_eval": evaluate(policy, data, tr[:: max(1, len(tr) // 20000)]),
-    }
-    info["val_by_kind"] = _by_kind(policy, data, va)
-    return policy, info
-
-
-def _by_kind(policy: ResidualPolicy, data: dict, idx: np.ndarray) -> dict:
-    kinds = np.array([data["episodes"][e]["kind"] for e in range(len(data["episodes"]))]) if "episodes" in data else None
-    if kinds is None or len(idx) == 0:
-        return {}
-    pos = {info["index"]: j for j, info in enumerate(data["episodes"])}
-    sample_kind = np.array([kinds[pos[int(e)]] for e in data["episode"][idx]])
-    return {k: evaluate(policy, data, idx[sample_kind == k]) for k in sorted(set(sample_kind))}
-
-
 # ---------------------------------------------------------------- the card
 #: how the label's lead and the augmentation were chosen (measured once; the command does not rerun this).
 DESIGN_NOTES = [
@@ -458,16 +335,32 @@ DESIGN_NOTES = [
     "column above).", "",
 ]
 
+
 def write_card(path: Path, ckpt: Path, command: str, specs: list[EpisodeSpec], data: dict, info: dict,
                collect_wall_s: float, total_wall_s: float, lead_s: float) -> None:
-    v, t = info["val"], info["train_eval"]
+    """Write the residual's model card: how it was made, the losses, the offline errors, the features, the design
+    notes."""
+    lines = _card_made_lines(ckpt, command, specs, data, info, collect_wall_s, total_wall_s, lead_s)
+    lines += _card_loss_lines(info["history"])
+    lines += _card_error_lines(info, lead_s)
+    lines += ["", "## Features", "", "See `policy/residual.py` (`residual_features`, `FEATURE_NAMES`): "
+              "measurement - base waypoint, measurement - TCP (/0.1 m), the two-measurement velocity estimate and "
+              "the TCP velocity (/0.3 m/s), observation age / chunk span and in s, the measurement's position in "
+              "the workspace (centre (0.5, 0, 0.3) m, /0.15 m); NaN counts as 0, everything is clipped to +-10.", ""]
+    lines += DESIGN_NOTES
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _card_made_lines(ckpt: Path, command: str, specs: list[EpisodeSpec], data: dict, info: dict,
+                     collect_wall_s: float, total_wall_s: float, lead_s: float) -> list[str]:
+    """The card's title, what the residual is, and how it was made (command, data, label, model, training, time)."""
     cfg = info["config"]
     kinds = sorted({s.kind for s in specs})
     sources = sorted({s.source for s in specs})
     leads = sorted({s.lead or "(default)" for s in specs if s.source == "expert"})
     seeds = [s.seed for s in specs]
     per_kind = {k: sum(s.kind == k for s in specs) for k in kinds}
-    lines = [
+    return [
         f"# Model card: `{ckpt.name}` (A2C2-style learned residual)", "",
         "A small MLP (`policy.residual.ResidualPolicy`) that, at the perception rate (100 Hz), takes the base "
         "waypoint being executed, the age of the chunk's observation, the latest two target measurements of the "
@@ -491,13 +384,22 @@ def write_card(path: Path, ckpt: Path, command: str, specs: list[EpisodeSpec], d
         f"augmentation p = {info['tcp_shift_prob']}, seed {info['seed']}",
         f"- wall time: {total_wall_s:.0f} s in all ({collect_wall_s:.0f} s collecting, {info['train_wall_s']:.0f} s "
         "training) on the 2-core CPU", "",
-        "## Losses (MSE of the correction / max_correction_m)", "",
-        "| epoch | train | val |", "|---|---|---|",
     ]
-    hist = info["history"]
+
+
+def _card_loss_lines(hist: list[dict]) -> list[str]:
+    """The loss table: five epochs from the first to the last."""
+    lines = ["## Losses (MSE of the correction / max_correction_m)", "", "| epoch | train | val |", "|---|---|---|"]
     shown = sorted({0, len(hist) // 4, len(hist) // 2, (3 * len(hist)) // 4, len(hist) - 1})
-    lines += [f"| {hist[i]['epoch'] + 1} | {hist[i]['train_loss']:.2e} | {hist[i]['val_loss']:.2e} |" for i in shown]
-    lines += [
+    return lines + [f"| {hist[i]['epoch'] + 1} | {hist[i]['train_loss']:.2e} | {hist[i]['val_loss']:.2e} |"
+                    for i in shown]
+
+
+def _card_error_lines(info: dict, lead_s: float) -> list[str]:
+    """The offline errors of the waypoint: val and a train subset, within the bound, by family."""
+    v, t = info["val"], info["train_eval"]
+    max_m = info["config"]["max_correction_m"]
+    lines = [
         "", "## Offline error of the waypoint (held-out episodes)", "",
         "Mean distance (mm) of the waypoint to the true target, over the val samples; `lead`: the target at "
         f"t + {lead_s * 1e3:g} ms (the label's), `now`: at t; `bounded label` is the best a correction within the "
@@ -511,7 +413,7 @@ def write_card(path: Path, ckpt: Path, command: str, specs: list[EpisodeSpec], d
                      f"{e['corrected_err_lead_mm']:.1f} | {e['bounded_label_err_lead_mm']:.1f} | "
                      f"{e['correction_vs_label_rmse_mm']:.1f} |")
     if "corrected_err_within_bound_mm" in v:
-        lines += ["", f"Where the bound does not bite (|target(t + lead) - base| < {cfg['max_correction_m']} m: "
+        lines += ["", f"Where the bound does not bite (|target(t + lead) - base| < {max_m} m: "
                   f"{v['share_within_bound']:.0%} of the val samples) the corrected waypoint is "
                   f"{v['corrected_err_within_bound_mm']:.1f} mm from the label's target, the base waypoint "
                   f"{v['base_err_within_bound_mm']:.1f} mm."]
@@ -521,12 +423,7 @@ def write_card(path: Path, ckpt: Path, command: str, specs: list[EpisodeSpec], d
         if e:
             lines.append(f"| {k} | {e['n']:,} | {e['base_err_now_mm']:.1f} | {e['corrected_err_now_mm']:.1f} | "
                          f"{e['bounded_label_err_now_mm']:.1f} |")
-    lines += ["", "## Features", "", "See `policy/residual.py` (`residual_features`, `FEATURE_NAMES`): "
-              "measurement - base waypoint, measurement - TCP (/0.1 m), the two-measurement velocity estimate and "
-              "the TCP velocity (/0.3 m/s), observation age / chunk span and in s, the measurement's position in "
-              "the workspace (centre (0.5, 0, 0.3) m, /0.15 m); NaN counts as 0, everything is clipped to +-10.", ""]
-    lines += DESIGN_NOTES
-    path.write_text("\n".join(lines) + "\n")
+    return lines
 
 
 # ---------------------------------------------------------------- CLI

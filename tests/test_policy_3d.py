@@ -17,7 +17,8 @@ from mmact_ctrl.loop import run_episode
 from policy.bundle import untrained_bundle
 from policy.config import ModelConfig
 from policy.dataset import DatasetError, PolicyDataset, read_meta
-from policy.train import known_prefix_mask, load_tokenized
+from policy.training.batches import known_prefix_mask
+from policy.training.tokenize import load_tokenized
 from scenarios.collect import CollectConfig, collect, in_box
 from scenarios.world.factory import make_expert, make_world
 from scenarios.world.panda_scene import TARGET_RGBA
@@ -80,7 +81,7 @@ def test_the_two_frame_layout_round_trips_through_the_token_sequence(demos3d):
     bundle.camera_names, bundle.frame_offsets_s = ["front", "side"], [0.0, -0.1]
     data = load_tokenized(bundle, str(demos3d), progress=False)
     assert data["img"].shape[1:] == (4, 12, 12) and data["fut"].shape[1:] == (2, 12, 12)
-    from policy.train import build_task_batch
+    from policy.training.batches import build_task_batch
 
     idx = np.arange(3)
     toks, lay = build_task_batch(bundle, data, "mm2a", idx)

@@ -127,7 +127,7 @@ LAYOUT = ["--ball-tokens", "1", "--aux-positions", "2", "--mm2a-image-frames", "
 
 
 def _losses(bundle: PolicyBundle, data, idx) -> dict[str, float]:
-    from policy.train import task_loss
+    from policy.training.losses import task_loss
 
     bundle.model.eval()
     out = {}
@@ -142,7 +142,8 @@ def _losses(bundle: PolicyBundle, data, idx) -> dict[str, float]:
 
 def test_training_lowers_the_loss_of_each_task_token(box_data):
     """<|mm2a|> (its chunk and its aux ball positions), <|t2i|> and <|mmu|> all fit better after training."""
-    from policy.train import load_tokenized, main as train_main
+    from policy.train import main as train_main
+    from policy.training.tokenize import load_tokenized
 
     root, s0 = box_data
     common = ["--data", str(root / "data"), "--stage", "2", "--w-text", "1", "--w-image", "1", "--w-aux", "1", *TINY]
@@ -199,7 +200,8 @@ def test_token_caches_accumulate_and_one_of_another_detector_or_tokenizer_is_ref
     import dataclasses
 
     from policy.token_cache import TokenCacheError, load_token_cache, main as cache_main
-    from policy.train import main as train_main, training_tokens
+    from policy.train import main as train_main
+    from policy.training.data import training_tokens
 
     root, s0 = box_data
     ck = train_main(["--data", str(root / "data"), "--stage", "2", "--init", str(s0), "--out", str(tmp_path / "c"),

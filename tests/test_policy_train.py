@@ -103,7 +103,7 @@ def test_several_dataset_directories_train_together(syn, tmp_path):
 
 
 def test_data_weights_set_how_often_each_directory_is_drawn():
-    from policy.train import sampling_probabilities
+    from policy.training.data import sampling_probabilities
 
     source = np.array([0] * 30 + [1] * 10)
     assert sampling_probabilities(source, None, 2) is None
@@ -121,7 +121,7 @@ def test_data_weights_set_how_often_each_directory_is_drawn():
 
 def test_eval_subset_represents_every_directory():
     """The held-out indices are sorted by directory: the evaluation subset must not be only the first one."""
-    from policy.train import eval_subset
+    from policy.training.data import eval_subset
 
     _, val = split_indices(2000, 0.1, 1234)
     sub = eval_subset(val, 64, 1234)

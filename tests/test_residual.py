@@ -1,11 +1,13 @@
-"""The learned residual (``policy.residual``) and its training (``scenarios.train_residual``), tiny sizes."""
+"""The learned residual (``policy.residual``) and its training (``policy.residual_training``,
+``scenarios.train_residual``), tiny sizes."""
 
 import numpy as np
 import pytest
 import torch
 
 from policy.residual import FEATURE_DIM, FEATURE_NAMES, ResidualConfig, ResidualPolicy, residual_features
-from scenarios.train_residual import TRAIN_SEED0, clip_norm, collect_samples, plan_episodes, split_episodes, train
+from policy.residual_training import clip_norm, split_episodes, train
+from scenarios.train_residual import TRAIN_SEED0, collect_samples, plan_episodes
 
 
 def _synthetic(n_episodes=8, per=150, seed=0):

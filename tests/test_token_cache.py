@@ -9,7 +9,9 @@ from policy.bundle import PolicyBundle
 from policy.inference import MMActPolicy
 from policy.synthetic import write_synthetic_dataset
 from policy.token_cache import TokenCacheError, load_token_cache, main as cache_main, read_header
-from policy.train import budget_steps, load_tokenized, main as train_main
+from policy.train import main as train_main
+from policy.training.stage12 import budget_steps
+from policy.training.tokenize import load_tokenized
 
 TINY = ["--d-model", "32", "--layers", "1", "--heads", "2", "--batch-size", "4", "--eval-samples", "4", "--no-progress"]
 
