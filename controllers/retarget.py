@@ -38,6 +38,9 @@ from dataclasses import dataclass
 import numpy as np
 
 RULES: tuple[str, ...] = ("none", "displacement", "snap", "warp")
+#: the axes a chunk is retargeted on: ``xyz`` (its aim is the target: reach), or ``xy`` only (its waypoints keep their
+#: heights over an object that moves in the table's plane: a pick's approach above the cube, its descent, its lift)
+PULL_AXES: tuple[str, ...] = ("xyz", "xy")
 
 
 @dataclass(frozen=True)
@@ -46,17 +49,21 @@ class RetargetConfig:
     rule: one of ``RULES``.
     trust_radius_m: gate on the distance between the chunk's aim and the target at observation time, m.
     min_travel_m: ``warp``: a chunk whose aim is nearer than this to its first waypoint is blended in time, m.
+    pull_axes: one of ``PULL_AXES``.
     """
 
     rule: str = "warp"
     trust_radius_m: float = 0.3
     min_travel_m: float = 0.02
+    pull_axes: str = "xyz"
 
     def __post_init__(self) -> None:
         if self.rule not in RULES:
             raise ValueError(f"retarget rule must be one of {RULES}, got {self.rule!r}")
         if not self.trust_radius_m > 0:
             raise ValueError(f"trust_radius_m must be > 0, got {self.trust_radius_m}")
+        if self.pull_axes not in PULL_AXES:
+            raise ValueError(f"retarget pull_axes must be one of {PULL_AXES}, got {self.pull_axes!r}")
         if not self.min_travel_m > 0:
             raise ValueError(f"min_travel_m must be > 0, got {self.min_travel_m}")
 

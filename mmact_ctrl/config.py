@@ -69,6 +69,12 @@ class StackConfig:
         mpc_phase_s: hybrid with MPC: the MPC ticks are at ``mpc_phase_s + n / mpc.rate_hz``. The real-time mode sets
             5 ms, half a 100 Hz perception period, so the MPC's 50 Hz work and the filter's 100 Hz fusion fall on
             different ticks (together they made the slowest ticks); 0 in simulated time keeps the published results.
+        contact_force_limit_n: the largest external force on the robot that is not a violation, N
+            (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
+        grasp_reflex: the fast layer closes the gripper when the measured object is between the fingers, and keeps
+            it open until then, whatever the chunk's clock says (``mmact_ctrl.control.grasp_reflex``).
+        compliance: the TCP tracks its reference as a spring-damper, stiff or soft per tool axis, whose force is
+            capped below ``contact_force_limit_n`` (``controllers.qp.impedance``), in place of stiff tracking.
     """
 
     mode: str = "hybrid"
@@ -95,6 +101,9 @@ class StackConfig:
     mpc_blend_s: float = 0.02
     mpc_phase_s: float = 0.0
     residual_checkpoint: str = ""
+    contact_force_limit_n: float = 30.0
+    grasp_reflex: bool = False
+    compliance: bool = False
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: EstimatorConfig = field(default_factory=EstimatorConfig)
@@ -122,6 +131,8 @@ class StackConfig:
             raise ValueError(f"chunk_timeout_s must be a finite number > 0, got {self.chunk_timeout_s}")
         if not self.splice_radius_m > 0:
             raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
+        if not (math.isfinite(self.contact_force_limit_n) and self.contact_force_limit_n > 0):
+            raise ValueError(f"contact_force_limit_n must be a force > 0 N, got {self.contact_force_limit_n}")
         if not math.isfinite(self.tcp_floor_m):
             raise ValueError(f"tcp_floor_m must be a finite height in m, got {self.tcp_floor_m}")
         if self.mpc_plan_start not in ("measured", "tracked"):

@@ -60,6 +60,9 @@ class EpisodeLog:
     instruction: str = ""
     frames: list[np.ndarray] = field(default_factory=list)
     safety_counts: dict[str, int] = field(default_factory=dict)
+    #: the task's own figures (``World.task_report()`` of a contact task: its success predicate, time to grasp, ...);
+    #: None for reach, whose figures are these arrays'
+    task: dict | None = None
     torque_rate_max_nm_s: float = 0.0
     rejections: dict[str, int] = field(default_factory=dict)
     watchdog_stops: int = 0

@@ -92,6 +92,7 @@ SAFETY_KEYS: dict[str, str] = {
     "accel": "accel_violations",
     "jerk": "jerk_violations",
     "tcp_speed": "tcp_speed_violations",
+    "contact_force": "contact_force_violations",
 }
 #: fault counters summed over episodes
 FAULT_KEYS: tuple[str, ...] = ("rejected_chunks", "watchdog_stops", "gated_measurements", "missed_ticks", "aborts",
@@ -166,7 +167,25 @@ def episode_metrics(log: EpisodeLog, config: MetricsConfig = MetricsConfig()) ->
         **_realtime_episode(log),
         # what the source said when it failed (whole); only when it did, so other episodes' figures are unchanged
         **({"source_errors": [dict(e) for e in log.source_errors]} if log.source_errors else {}),
+        **_task_figures(log),
     }
+
+
+#: the task figures a contact task's world reports (``EpisodeLog.task``), summarised over episodes as medians
+TASK_MEDIAN_KEYS: tuple[str, ...] = ("time_to_grasp_s", "time_to_seat_s", "object_speed_at_grasp_m_s",
+                                     "lateral_error_at_contact_m", "peak_contact_force_n", "peg_slip_m")
+#: ... and as sums
+TASK_SUM_KEYS: tuple[str, ...] = ("closings", "drops", "jams")
+
+
+def _task_figures(log: EpisodeLog) -> dict:
+    """A contact task's figures (``EpisodeLog.task``): its predicate replaces reach's ``success`` (and
+    ``wrong_object``), its figures are added; nothing for reach."""
+    if not log.task:
+        return {}
+    figures = {k: v for k, v in log.task.items() if k != "task"}
+    return {**figures, "task": log.task.get("task", ""), "success": bool(log.task["success"]),
+            "wrong_object": bool(log.task.get("wrong_object", False))}
 
 
 def _outcome(log, err, inside, start, dt, jerk, switch_acc, wrong_object, safety) -> dict:
@@ -314,6 +333,18 @@ def _realtime_summary(episodes: list[dict], ticks: int) -> dict:
     }
 
 
+def _task_summary(episodes: list[dict]) -> dict:
+    """Medians and sums of the contact tasks' figures (none for reach)."""
+    out: dict = {}
+    for key in TASK_MEDIAN_KEYS:
+        if any(key in e for e in episodes):
+            out[key] = _nanmedian([float(e.get(key, float("nan"))) for e in episodes])
+    for key in TASK_SUM_KEYS:
+        if any(key in e for e in episodes):
+            out[key] = int(sum(int(e.get(key, 0)) for e in episodes))
+    return out
+
+
 def _nanmedian(values: list[float]) -> float:
     v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
     return float(np.median(v)) if v.size else float("nan")
@@ -351,6 +382,7 @@ def summarize(episodes: list[dict], tick_us: np.ndarray, after_us: np.ndarray | 
     recovery = [s for e in episodes for s in e["jump_recovery_s"]]
     return {
         "episodes": len(episodes),
+        **_task_summary(episodes),
         "success_rate": float(np.mean([e["success"] for e in episodes])),
         "success_ci95": list(wilson_interval(int(sum(bool(e["success"]) for e in episodes)), len(episodes))),
         "wrong_object_rate": float(np.mean([e.get("wrong_object", False) for e in episodes])),

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from controllers.contact_safety import CONTACT_FORCE, ContactForceMonitor
 from controllers.safety import NONFINITE, CommandLimits, SafetyMonitor
 from mmact_ctrl.chunk import ChunkSource, Observation
 from mmact_ctrl.chunk_intake import ChunkIntake
@@ -97,9 +98,10 @@ class EpisodeRunner(SourceQueries):
         state = world.reset(seed)
         if initial_dq_rad_s is not None:
             state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
-        tau_start = controller.reset(state.q_rad, state.dq_rad_s)
+        tau_start = controller.reset(state.q_rad, state.dq_rad_s, state.gripper_m)
         self.monitor = SafetyMonitor(CommandLimits(dt_s=dt))
         self.monitor.reset(tau_start)
+        self.contact = ContactForceMonitor(cfg.contact_force_limit_n)
         self.intake = ChunkIntake(cfg.splice_radius_m, self.spec.action_token_range)
         self.latency_s = cfg.latency_ms / 1000.0
         self.replan_period_s = 1.0 / cfg.replan_hz
@@ -192,6 +194,8 @@ class EpisodeRunner(SourceQueries):
         """The first part of tick ``k``: measurements, and the query when one is due; True when it pauses there."""
         k, log, t = self.k, self.log, self.k * self.dt_s
         self._state = self.world.state()
+        self.contact.check(self._state.wrench_ext)
+        self.controller.sense_wrench(self._state.wrench_ext)
         s0 = time.perf_counter()
         try:
             arrived = self.sensor.poll(t)
@@ -315,6 +319,10 @@ class EpisodeRunner(SourceQueries):
         log.plan_resyncs, log.floor_clamps, log.mpc_bypass_ticks = c.plan_resyncs, c.floor_clamps, c.mpc_bypass_ticks
         log.watchdog_stops, log.gated_measurements = c.watchdog_stops, dict(c.gated_measurements)
         log.safety_counts = self.monitor.counts
+        if self.contact.violations:  # a kind of its own, counted only where it happened (reach's counts unchanged)
+            log.safety_counts[CONTACT_FORCE] = self.contact.violations
+        task_report = getattr(world, "task_report", None)  # a contact task's world reports its own figures
+        log.task = task_report() if task_report is not None else None
         log.torque_rate_max_nm_s = self.monitor.torque_rate_max_nm_s
         log.rejections = dict(self.intake.rejections)
         log.source_errors = [dict(e) for e in self.intake.source_errors]

@@ -18,6 +18,8 @@ class RobotState:
         dq_rad_s: arm joint velocities (7,), rad/s.
         gripper_m: gripper opening (sum of both finger joints), m.
         ee_pos_m: measured TCP position (3,), world frame, m (for metrics; controllers use their own FK).
+        wrench_ext: the external wrench on the robot at the TCP (6,): force N and torque N m, world frame (a real
+            Panda reports it as ``O_F_ext_hat_K``); None where nothing can touch the robot (the reach scenes).
     """
 
     t_s: float
@@ -25,6 +27,7 @@ class RobotState:
     dq_rad_s: np.ndarray
     gripper_m: float
     ee_pos_m: np.ndarray
+    wrench_ext: np.ndarray | None = None
 
 
 class World(Protocol):

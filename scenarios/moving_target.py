@@ -55,7 +55,8 @@ def make_source_and_world(args: argparse.Namespace):
     source's cameras), ``--plane-z-m`` / ``--objects`` overriding."""
     settings = settings_from_args(args)
     settings.check()
-    world_kw = dict(noise_m=args.noise_m, dropout=args.dropout, instruction=args.instruction)
+    world_kw = dict(noise_m=args.noise_m, dropout=args.dropout, instruction=args.instruction,
+                    task=getattr(args, "task", "reach"), clearance_mm=getattr(args, "clearance_mm", 1.0))
     if settings.kind == "expert":
         plane_z_m = 0.0 if args.plane_z_m == "auto" else args.plane_z_m
         world = make_world(args.target, args.speed, n_objects=args.objects or 2, plane_z_m=plane_z_m, **world_kw)
@@ -99,7 +100,10 @@ def realtime_source_args(args: argparse.Namespace):
     from mmact_ctrl.realtime.loop_thread import cpu_split
 
     _, workers = cpu_split(0)
-    served = ServedSource(serve_argv(settings), cpus=workers)
+    argv = serve_argv(settings)
+    if settings.kind == "expert":  # the expert of the task being run
+        argv += ["--task", getattr(args, "task", "reach")]
+    served = ServedSource(argv, cpus=workers)
     # the served source declares itself: none of its own switches apply to the URL
     remote = argparse.Namespace(**{**vars(args), "source": served.url, "checkpoint": None, "source_arg": [],
                                    "action_steps": None, "refine_bins": None, "expert_lead": None, "horizon": None,

@@ -88,6 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     _source_args(p)
     _execution_args(p)
     _world_args(p)
+    _task_args(p)
     _output_args(p)
     _realtime_args(p)
     return p
@@ -246,6 +247,29 @@ def _world_args(p: argparse.ArgumentParser) -> None:
     w.add_argument("--seed", type=_number(int, "--seed", 0), default=0, help="seed of the first episode (episode i uses seed+i)")
 
 
+def _task_args(p: argparse.ArgumentParser) -> None:
+    """The task (``scenarios.world.tasks``) and the contact layers."""
+    from scenarios.world.tasks.registry import TASKS
+
+    t = p.add_argument_group("task and contact")
+    t.add_argument("--task", choices=TASKS, default="reach",
+                   help="reach: the TCP within 3 cm of a ball for 0.3 s (mocap balls, no contact); pick: grasp the "
+                        "instructed cube on a conveyor moving as --target at --speed and lift it 5 cm for 1 s "
+                        "(the scripted expert can; the shipped policy was trained for reach only)")
+    t.add_argument("--clearance-mm", type=_number(float, "--clearance-mm", 0, False), default=1.0,
+                   help="insert: the hole's clearance over the peg, per side (mm)")
+    t.add_argument("--grasp-reflex", action="store_true",
+                   help="the fast layer keeps the gripper open until the measured object is between the fingers "
+                        "and closes it then, whatever the chunk's clock says (default: the chunk's gripper channel)")
+    t.add_argument("--compliance", action="store_true",
+                   help="the TCP tracks its reference as a spring-damper (stiff across, soft along the approach "
+                        "axis) whose force is capped at 2/3 of --contact-force-limit-n, in place of stiff tracking "
+                        "(controllers.qp.impedance); every mode")
+    t.add_argument("--contact-force-limit-n", type=_number(float, "--contact-force-limit-n", 0, False), default=30.0,
+                   help="external force on the robot above which a tick counts as a contact_force violation (N; "
+                        "franka_ros2's default collision thresholds are 30 N lower / 40 N upper)")
+
+
 def _output_args(p: argparse.ArgumentParser) -> None:
     """What is written: JSON, plot, video, Rerun, viewer."""
     o = p.add_argument_group("output")
@@ -284,11 +308,20 @@ def _realtime_args(p: argparse.ArgumentParser) -> None:
 
 
 def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
+    """The stack of ``mode`` from the switches; the task (``--task``) sets the TCP floor it needs and the axes a chunk is
+    retargeted on (``scenarios.world.tasks``)."""
+    from scenarios.world.tasks.registry import task_by_name
+
+    task = task_by_name(getattr(args, "task", "reach"))
     return StackConfig(
         mode=mode,
         use_ruckig=not args.no_ruckig,
         use_mpc=not args.no_mpc,
-        retarget=RetargetConfig(rule=args.retarget, trust_radius_m=args.trust_radius_m),
+        retarget=RetargetConfig(rule=args.retarget, trust_radius_m=args.trust_radius_m, pull_axes=task.pull_axes),
+        **({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
+        contact_force_limit_n=getattr(args, "contact_force_limit_n", 30.0),
+        grasp_reflex=bool(getattr(args, "grasp_reflex", False)),
+        compliance=bool(getattr(args, "compliance", False)),
         replan_hz=args.replan_hz,
         latency_ms=0.0 if args.latency_ms == "measured" else args.latency_ms,
         measured_latency=args.latency_ms == "measured",

@@ -28,6 +28,7 @@ from mmact_ctrl.sources.openpi.server import DEFAULT_PORT, ListenError, PolicySe
 from mmact_ctrl.sources.remote.serving import SourcePolicy
 from scenarios.cli import OneLineErrorParser as _OneLineErrorParser
 from scenarios.cli import number as _number
+from scenarios.world.tasks.registry import TASKS
 from scenarios.world.expert import LEADS
 
 PROG = "python -m scenarios.serve"
@@ -98,6 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="objects at this height (m), 0 = the full 3-D workspace (the expert's lead reflects at the "
                         "walls of this workspace)")
     w.add_argument("--objects", type=int, choices=(1, 2), default=2, help="objects in the scene")
+    w.add_argument("--task", choices=TASKS, default="reach",
+                   help="the task the scripted expert does (scenarios.world.tasks; run the client with the same --task)")
     c = p.add_argument_group("convention")
     c.add_argument("--preset", metavar="NAME|PATH", default=None,
                    help="expert or module:factory: speak this convention instead of ours (libero, droid, or a JSON "
@@ -153,7 +156,7 @@ def make_served_source(args: argparse.Namespace):
     if args.source == "expert":
         from scenarios.world.factory import make_expert, make_world
 
-        world = make_world("linear", plane_z_m=args.plane_z_m, n_objects=args.objects)  # for its workspace box
+        world = make_world("linear", plane_z_m=args.plane_z_m, n_objects=args.objects, task=args.task)  # its box
         try:
             lead = args.expert_lead or "velocity"
             conv = _preset(args)
@@ -167,7 +170,7 @@ def make_served_source(args: argparse.Namespace):
         finally:
             world.close()
         cfg = source.config
-        return source, scene, (f"scripted expert (lead {lead}, {cfg.horizon} x {cfg.dt_s:g} s, "
+        return source, scene, (f"scripted {args.task} expert (lead {lead}, {cfg.horizon} x {cfg.dt_s:g} s, "
                                f"{source.tokenizer.bins if source.tokenizer else 'no'} bins)")
     from mmact_ctrl.sources.loader import load_source, parse_source_args
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from controllers.mpc import TaskSpaceMPC
 from controllers.qp import TaskReference, TaskSpaceQP
+from controllers.qp.impedance import ImpedanceTask
 from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import rotvec_from_rot
 from controllers.smoother import TaskSpaceSmoother
@@ -27,6 +28,8 @@ from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
 from mmact_ctrl.control.floor import FloorClamp
+from mmact_ctrl.control.force_guard import ContactForceGuard
+from mmact_ctrl.control.grasp_reflex import GraspReflex
 from mmact_ctrl.control.plan_tracker import PlanTracker
 from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, SmoothedSample, TickOutput
 from mmact_ctrl.control.smoothing import SmoothingStage
@@ -34,6 +37,21 @@ from mmact_ctrl.control.view import ExecutorView
 from mmact_ctrl.executors import ChunkExecutor, make_executor
 from mmact_ctrl.mpc_worker import InlineMPC
 from mmact_ctrl.reference import ChunkReference
+
+#: a measured external force over this at the TCP is contact: the chunk's correction is latched (ChunkStage), N (a held
+#: 50 g peg weighs 0.5 N; a touch on a fixture is several N)
+CONTACT_LATCH_N = 3.0
+
+
+def make_qp(config: StackConfig) -> TaskSpaceQP:
+    """The 1 kHz QP: the default tasks (the compiled fast path), or with ``config.compliance`` the impedance task in
+    place of the stiff TCP position task (``controllers.qp.impedance``; its force capped at 2/3 of the contact-force
+    limit, so that the spring and the damper together stay under it)."""
+    qp_config = replace(config.qp, dt_s=config.dt_s)
+    if not config.compliance:
+        return TaskSpaceQP(qp_config)
+    stiff_off = replace(qp_config, tcp=replace(qp_config.tcp, w_pos=0.0))
+    return TaskSpaceQP(stiff_off, extra_tasks=(ImpedanceTask(force_max_n=config.contact_force_limit_n * 2.0 / 3.0),))
 
 
 class HybridController:
@@ -50,7 +68,7 @@ class HybridController:
                  executor: ChunkExecutor | None = None) -> None:
         self.config = config
         self.model = model if model is not None else PandaModel()
-        self.qp = TaskSpaceQP(replace(config.qp, dt_s=config.dt_s))
+        self.qp = make_qp(config)
         self.executor = executor if executor is not None else make_executor(config.mode)
         layers = self.executor.layers
         self.reads_target = layers.reads_target
@@ -60,8 +78,12 @@ class HybridController:
         _, self.rot_nominal = self.model.fk(self.q_post)
         self.filter = TargetEstimator(replace(config.filter, dt_s=1.0 / config.perception_hz))
         sc = config.smoother
-        self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3))
+        self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
+                                in_hand=self._object_in_hand, in_contact=self._in_contact)
+        self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
+        self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s)
         self.floor = FloorClamp(config.tcp_floor_m)
+        self.reflex = GraspReflex(config.grasp_reflex)
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -160,17 +182,22 @@ class HybridController:
             self.tracker.defer_updates = bool(defer)
 
     # ---- the episode -------------------------------------------------------------------------------------------
-    def reset(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None) -> np.ndarray:
-        """New episode: hold the current pose until the first chunk is active. Returns the torque the robot is
+    def reset(self, q_rad: np.ndarray, dq_rad_s: np.ndarray | None = None,
+              gripper_m: float = GRIPPER_OPEN_M) -> np.ndarray:
+        """New episode: hold the current pose and the gripper's opening ``gripper_m`` (m) until the first chunk is
+        active. Returns the torque the robot is
         taken to apply before the first command, ``h(q, dq)`` (gravity, Coriolis, damping: what a Panda's own
         gravity compensation does with a zero user torque); the first command's rate is measured against it."""
         q = np.asarray(q_rad, dtype=float)
         dq = np.zeros(7) if dq_rad_s is None else np.asarray(dq_rad_s, dtype=float)
         pos, rot = self.model.fk(q)
         rotvec = rotvec_from_rot(rot, self.rot_nominal)
-        self._gripper_m = GRIPPER_OPEN_M
-        self.chunk.reset(pos, rotvec)
+        self._gripper_m = float(gripper_m)
+        self._force_n = 0.0
+        self.force_guard.reset()
+        self.chunk.reset(pos, rotvec, gripper_m)
         self.floor.clamps = 0
+        self.reflex.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -279,11 +306,34 @@ class HybridController:
         else:
             s = self.smoothed_reference(t_s)
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
+        pos = self.force_guard.apply(pos)
         tau = self.qp.solve(terms, q_rad, dq_rad_s,
                             TaskReference(pos, vel, acc, s.rot, s.ang_vel_rad_s, s.ang_acc_rad_s2, q_post))
-        self._gripper_m = s.gripper_m
-        return TickOutput(tau_nm=tau, gripper_m=s.gripper_m, ref_pos_m=s.pos_m, ee_pos_m=terms.pos_m,
+        gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
+        self._gripper_m = gripper_m
+        return TickOutput(tau_nm=tau, gripper_m=gripper_m, ref_pos_m=s.pos_m, ee_pos_m=terms.pos_m,
                           ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])
+
+    def sense_wrench(self, wrench: np.ndarray | None) -> None:
+        """The robot's measured external wrench at the TCP this tick (``RobotState.wrench_ext``; None where the world
+        measures none, as in reach)."""
+        self._force_n = 0.0 if wrench is None else float(np.linalg.norm(np.asarray(wrench)[:3]))
+        self.force_guard.update(None if wrench is None else np.asarray(wrench)[:3])
+
+    def _in_contact(self) -> bool:
+        """Whether the robot touches the world: the measured external force over ``CONTACT_LATCH_N``."""
+        return self._force_n > CONTACT_LATCH_N
+
+    def _object_in_hand(self) -> bool:
+        """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``)."""
+        terms = getattr(self, "terms", None)
+        if terms is None or not self.filter.initialized:
+            return False
+        return GraspReflex.between(terms.pos_m, self.filter.predict_pos(self.filter.t_s))
+
+    def _object_now(self, t_s: float) -> np.ndarray | None:
+        """The target estimate now (the grasp reflex's object), None before the first measurement."""
+        return self.filter.predict_pos(t_s) if self.filter.initialized else None
 
     def end_tick(self, spare: bool = True) -> float:
         """After the tick's command is sent (the deadline order): a stage of the deferred MPC update

@@ -12,6 +12,9 @@ from mmact_ctrl.reference import ChunkReference
 
 
 
+_HORIZONTAL = np.array([1.0, 1.0, 0.0])
+
+
 class HybridExecutor(ClockedExecutor):
     """Retargets the executed chunk with the target estimate; Ruckig and the MPC run under it."""
 
@@ -67,6 +70,12 @@ class HybridExecutor(ClockedExecutor):
             self._trust = (ref, (ok, leading))
         return self._trust[1]
 
+    @staticmethod
+    def _pull_axes(cfg) -> np.ndarray | float:
+        """The axes a chunk is retargeted on (``RetargetConfig.pull_axes``): all (1.0: reach's figures stay the same
+        bit for bit), or x and y only."""
+        return _HORIZONTAL if cfg.pull_axes == "xy" else 1.0
+
     def _pull_span_s(self, ref: ChunkReference) -> float:
         """How long the pull's blend weight takes from 0 (activation) to 1: ``pull_s``, or up to
         :meth:`_blend_end_s` if that is earlier, s."""
@@ -98,16 +107,17 @@ class HybridExecutor(ClockedExecutor):
             span = self._pull_span_s(ref)
             alpha = min(max((t_s - ref.t_active_s) / span, 0.0), 1.0)
             dalpha = 1.0 / span if 0.0 < alpha < 1.0 else 0.0
-            gap = est.predict_pos(t_s) - w[:3]
+            gap = (est.predict_pos(t_s) - w[:3]) * self._pull_axes(cfg)
             carry = self._carry_for(ref, ref.t_active_s)
             return ((1.0 - alpha) * carry + alpha * gap,
-                    alpha * (est.predict_vel(t_s) - w_rate[:3]) + dalpha * (gap - carry))
+                    alpha * (est.predict_vel(t_s) - w_rate[:3]) * self._pull_axes(cfg) + dalpha * (gap - carry))
         weight = None
         if cfg.rule == "warp":
             w, w_rate = ref.sample(t_s)
             weight = progress(cfg, ref.aim_pos_m, ref.chunk.waypoints[0, :3], w[:3], w_rate[:3])
-        return retarget_offset(cfg, t_s, ref.aim_pos_m, ref.target_at_obs_m, est.predict_pos(t_s),
-                               est.predict_vel(t_s), ref.t_active_s, self._blend_end_s(ref), weight)
+        offset, rate = retarget_offset(cfg, t_s, ref.aim_pos_m, ref.target_at_obs_m, est.predict_pos(t_s),
+                                       est.predict_vel(t_s), ref.t_active_s, self._blend_end_s(ref), weight)
+        return (offset * _HORIZONTAL, rate * _HORIZONTAL) if cfg.pull_axes == "xy" else (offset, rate)
 
     def offsets_many(self, times_s: np.ndarray, ref: ChunkReference) -> np.ndarray | None:
         est = self.view.estimate
@@ -118,10 +128,12 @@ class HybridExecutor(ClockedExecutor):
         if leading:
             alpha = np.clip((np.asarray(times_s, dtype=float) - ref.t_active_s) / self._pull_span_s(ref), 0.0, 1.0)
             carry = self._carry_for(ref, ref.t_active_s)
-            return (1.0 - alpha)[:, None] * carry + alpha[:, None] * (pred - ref.sample_positions(times_s))
+            gap = (pred - ref.sample_positions(times_s)) * self._pull_axes(self.view.config.retarget)
+            return (1.0 - alpha)[:, None] * carry + alpha[:, None] * gap
         cfg = self.view.config.retarget
         weights = None
         if cfg.rule == "warp":
             weights = progresses(cfg, ref.aim_pos_m, ref.chunk.waypoints[0, :3], ref.sample_positions(times_s))
-        return retarget_offsets(cfg, times_s, ref.aim_pos_m, ref.target_at_obs_m, pred, ref.t_active_s,
-                                self._blend_end_s(ref), weights)
+        offsets = retarget_offsets(cfg, times_s, ref.aim_pos_m, ref.target_at_obs_m, pred, ref.t_active_s,
+                                   self._blend_end_s(ref), weights)
+        return offsets * _HORIZONTAL if cfg.pull_axes == "xy" and offsets is not None else offsets

@@ -442,6 +442,9 @@ def _perception_fault(behaviour: str):
 
 def _moved_target(pos_m):
     def build(spec, world, source, controller, inj: Injection) -> None:
+        if not len(getattr(world, "_mocap", ())):  # a contact task's object is physical, not a mocap ball: n/a
+            inj.applicable = False
+            return
         inj.world = MovedTarget(world, pos_m, inj.window_s)
 
     return build

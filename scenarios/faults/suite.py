@@ -30,6 +30,7 @@ import numpy as np
 from mmact_ctrl.config import MODES
 from scenarios.faults.injectors import FAULTS, FaultSpec
 from scenarios.sources import source_spec_arg
+from scenarios.world.tasks.registry import TASKS, task_stack_settings
 
 PROG = "python -m scenarios.faults"
 SOURCES: tuple[str, ...] = ("expert", "policy")
@@ -41,6 +42,8 @@ RECOVERY_HOLD_S = 0.3
 #: quick mode: seeds, episode length, sources (timed on the shared 2-core machine: all 22 faults x 5 modes x
 #: both sources x 1 seed x 3 s take about 80-100 s sequentially).
 QUICK_SEEDS = 1
+#: the modes the suite runs by default on a contact task (``--task pick|insert``)
+CONTACT_MODES = ("open_loop", "hybrid")
 QUICK_DURATION_S = 3.0
 QUICK_ONSET_S = 0.5  # the 1.5 s windows end at 2.0 s, when the source is next asked (1 Hz): 0.8 s left to recover
 QUICK_SOURCES: tuple[str, ...] = ("expert", "policy")
@@ -48,7 +51,7 @@ QUICK_SOURCES: tuple[str, ...] = ("expert", "policy")
 EXPECTED_ABORTS: tuple[str, ...] = ("missed_ticks_20",)
 SAFETY_COLUMNS: tuple[str, ...] = (
     "limit_violations", "torque_rate_violations", "accel_violations", "jerk_violations", "nonfinite_commands",
-    "position_violations", "velocity_violations", "torque_violations", "tcp_speed_violations",
+    "position_violations", "velocity_violations", "torque_violations", "tcp_speed_violations", "contact_force_violations",
 )
 VIOLATION_KINDS: tuple[str, ...] = SAFETY_COLUMNS[1:]
 COLUMNS: tuple[str, ...] = (
@@ -126,6 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="episode length (s; default 5, 3 with --quick)")
     p.add_argument("--onset-s", type=_number(float, "--onset-s", 0), default=None,
                    help="fault onset (s; default 0.5, during the approach, also with --quick)")
+    p.add_argument("--task", choices=TASKS, default="reach",
+                   help="the task every episode runs (scenarios.world.tasks): reach, pick or insert (the expert then "
+                        "is the task's; default: reach)")
     p.add_argument("--out", metavar="DIR", default="out/faults", help="output directory")
     p.add_argument("--quick", action="store_true", help="the quick suite (see below)")
     p.add_argument("--workers", type=_number(int, "--workers", 1), default=1,
@@ -143,24 +149,27 @@ def _source_key(spec: str, args: dict | None) -> tuple:
     return ("source", spec, json.dumps(args or {}, sort_keys=True))
 
 
-def _world(source: str, target: str, speed: float, source_args: dict | None = None):
+def _world(source: str, target: str, speed: float, source_args: dict | None = None, task: str = "reach"):
     from scenarios.world.factory import make_world
     from scenarios.sources import scene_settings
 
-    key = ("world", _source_key(source, source_args), target, speed)
+    key = ("world", _source_key(source, source_args), target, speed, task)
     if key not in _CACHE:  # any source but the expert: the scenes it asks for (our policy's plane and cameras)
         extra = {"n_objects": 2, **(scene_settings(_source(source, source_args)) if source != "expert" else {})}
-        _CACHE[key] = make_world(target, speed, **extra)
+        _CACHE[key] = make_world(target, speed, **extra, **({"task": task} if task != "reach" else {}))
     return _CACHE[key]
 
 
-def _source(source: str, source_args: dict | None = None):
-    """The cell's chunk source (``scenarios.sources``): a fresh expert, any other built once per process."""
+def _source(source: str, source_args: dict | None = None, world=None):
+    """The cell's chunk source (``scenarios.sources``): a fresh expert (a contact task's, leading the object, when
+    ``world`` is one), any other built once per process."""
     from scenarios.sources import SourceSettings, build_source
 
     if source == "expert":
         from scenarios.world.factory import make_expert
 
+        if world is not None and world.scene.task != "reach":
+            return make_expert(lead="velocity", world=world)
         return make_expert()
     key = _source_key(source, source_args)
     if key not in _CACHE:
@@ -219,14 +228,16 @@ def run_cell(cell: dict, keep_log: bool = False):
     log = None
     t0 = time.perf_counter()
     try:
-        world = _world(cell["source"], cell["target"], cell["speed"], cell.get("source_args"))
-        source = _source(cell["source"], cell.get("source_args"))
-        controller = HybridController(StackConfig(mode=cell["mode"], duration_s=cell["duration_s"]), model=_model())
+        task = cell.get("task", "reach")
+        world = _world(cell["source"], cell["target"], cell["speed"], cell.get("source_args"), task)
+        source = _source(cell["source"], cell.get("source_args"), world)
+        controller = HybridController(StackConfig(mode=cell["mode"], duration_s=cell["duration_s"],
+                                                  **task_stack_settings(task)), model=_model())
         start, end = spec.window_s(controller.config.dt_s)
         row.update(fault_start_s=start, fault_end_s=end)
         log, inj = run_fault_episode(spec, world, source, controller, seed=int(cell["seed"]))
         m = episode_metrics(log)
-        row.update({k: m[k] for k in (*SAFETY_COLUMNS, "success", "final_error_m", "torque_rate_max_nm_s",
+        row.update({k: m.get(k, 0) for k in (*SAFETY_COLUMNS, "success", "final_error_m", "torque_rate_max_nm_s",
                                       "rejected_chunks", "watchdog_stops", "gated_measurements", "missed_ticks",
                                       "aborts", "qp_failures", "mpc_failures", "perception_errors")})
         row["qp_rescues"] = int(m.get("qp_rescues", 0))  # OSQP failed, DAQP solved
@@ -252,8 +263,10 @@ def make_cells(args) -> list[dict]:
     modes, e.g. inpaint for a source without ``plan_inpaint``)."""
     extra = {"source_args": args.source_args} if getattr(args, "source_args", None) else {}
     skip = getattr(args, "unservable", {}) or {}
+    task = getattr(args, "task", "reach")
     return [dict(fault=f, mode=m, source=s, seed=args.seed + i, target=args.target, speed=args.speed,
-                 duration_s=args.duration_s, onset_s=args.onset_s, **(extra if s not in SOURCES else {}))
+                 duration_s=args.duration_s, onset_s=args.onset_s, **(extra if s not in SOURCES else {}),
+                 **({"task": task} if task != "reach" else {}))
             for s in args.sources for f in args.faults for m in args.modes if m not in skip.get(s, ())
             for i in range(args.seeds)]
 
@@ -562,9 +575,11 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     args.faults = list(dict.fromkeys(args.faults or FAULTS))
-    args.modes = list(dict.fromkeys(args.modes or MODES))
-    if args.sources is None and not args.source:
-        args.sources = list(QUICK_SOURCES if args.quick else SOURCES)
+    # a contact task's study is open_loop vs hybrid (the other modes are reach's field fixes; their chunk blending
+    # was not built for a gripper channel: measured, temporal_ensemble and residual press a cube into the belt)
+    args.modes = list(dict.fromkeys(args.modes or (MODES if args.task == "reach" else CONTACT_MODES)))
+    if args.sources is None and not args.source:  # our policy knows reach only: a contact task runs the expert
+        args.sources = list(QUICK_SOURCES if args.quick else SOURCES) if args.task == "reach" else ["expert"]
     args.sources = list(dict.fromkeys((args.sources or []) + (args.source or [])))
     try:
         from mmact_ctrl.sources.loader import parse_source_args
@@ -575,8 +590,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc).splitlines()[0])
     if args.seeds is None:
         args.seeds = QUICK_SEEDS if args.quick else 3
-    if args.duration_s is None:
-        args.duration_s = QUICK_DURATION_S if args.quick else 5.0
+    if args.duration_s is None:  # a contact task needs 6 s (a grasp and lift, a seat take 3-5 s)
+        args.duration_s = (QUICK_DURATION_S if args.quick else 5.0) if args.task == "reach" else 6.0
     if args.onset_s is None:
         args.onset_s = QUICK_ONSET_S if args.quick else 0.5
     if not args.onset_s < args.duration_s:
@@ -639,7 +654,7 @@ def main(argv: list[str] | None = None) -> int:
     md = ["# Fault-injection suite", "",
           f"- command: `{command}`",
           f"- date: {started.strftime('%Y-%m-%d %H:%M:%S UTC')}; wall time {wall_s:.1f} s; {len(rows)} episodes",
-          f"- {'static target' if args.target == 'static' else f'{args.target} target at {args.speed:g} m/s'}, two balls, {args.duration_s:g} s episodes, fault onset "
+          f"- {'static target' if args.target == 'static' else f'{args.target} target at {args.speed:g} m/s'}, {'two balls' if args.task == 'reach' else f'task {args.task}'}, {args.duration_s:g} s episodes, fault onset "
           f"{args.onset_s:g} s, seeds {args.seed}..{args.seed + args.seeds - 1}, workers {args.workers}",
           f"- sources: {', '.join(args.sources)}; modes: {', '.join(args.modes)}",
           *[f"- {n}" for n in notes],

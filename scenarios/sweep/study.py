@@ -48,6 +48,9 @@ from scenarios.sources import build_source, close_source, settings_from_args, so
 
 AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception",
                          "lead", "d_steps", "s_steps")
+#: the axes of a contact task's cells (``--task pick|insert``); reach's cells carry none of them (their keys, and the
+#: published reach sweeps, are unchanged)
+TASK_AXES: tuple[str, ...] = ("task", "clearance_mm", "noise_m", "compliance")
 PERCEPTIONS: tuple[str, ...] = ("oracle", "camera")
 LEADS: tuple[str, ...] = ("velocity", "none")
 #: the expert's waypoint spacing: one RTC step, s
@@ -71,8 +74,20 @@ class Study:
     lead: tuple[str, ...] = ("velocity",)
     d_steps: tuple[int, ...] = ()
     s_steps: tuple[int, ...] = ()
+    task: str = "reach"
+    clearance_mm: tuple[float, ...] = (1.0,)
+    noise_m: tuple[float, ...] = (0.002,)
+    compliance: tuple[bool, ...] = (False,)
 
     def __post_init__(self) -> None:
+        from scenarios.world.tasks.registry import TASKS
+
+        if self.task not in TASKS:
+            raise ValueError(f"study {self.name!r}: unknown task {self.task!r}; expected one of {TASKS}")
+        if any(not (c > 0 and math.isfinite(c)) for c in self.clearance_mm) or \
+                any(not (n >= 0 and math.isfinite(n)) for n in self.noise_m):
+            raise ValueError(f"study {self.name!r}: clearance_mm must be > 0 and noise_m >= 0, got "
+                             f"{self.clearance_mm} and {self.noise_m}")
         bad = [m for m in self.modes if m not in MODES]
         if bad:
             raise ValueError(f"study {self.name!r}: unknown mode(s) {bad}; expected some of {MODES}")
@@ -106,10 +121,15 @@ class Study:
         else:
             timing = [dict(latency_ms=lat, replan_hz=f, d_steps=None, s_steps=None)
                       for f, lat in product(self.replan_hz, self.latency_ms)]
+        contact = [{}] if self.task == "reach" else [
+            dict(task=self.task, clearance_mm=c, noise_m=n, compliance=bool(k))
+            for c, n, k in product(self.clearance_mm, self.noise_m, self.compliance)]
         return [
-            {**base, "mode": m, **tm, "target": tg, "speed_m_s": sp, "bins": b, "seed": sd, "perception": pc, "lead": ld}
-            for m, tm, tg, sp, b, sd, pc, ld in product(
-                self.modes, timing, self.target, self.speed_m_s, self.bins, self.seeds, self.perception, self.lead,
+            {**base, "mode": m, **tm, "target": tg, "speed_m_s": sp, "bins": b, "seed": sd, "perception": pc, "lead": ld,
+             **ct}
+            for m, tm, tg, sp, b, ct, sd, pc, ld in product(
+                self.modes, timing, self.target, self.speed_m_s, self.bins, contact, self.seeds, self.perception,
+                self.lead,
             )
         ]
 
@@ -144,8 +164,33 @@ def default_grid(quick: bool = False, seeds: int = 10) -> list[Study]:
     ]
 
 
+def task_grid(task: str, quick: bool = False, seeds: int = 10) -> list[Study]:
+    """The grid of a contact task (``--task``): open_loop vs hybrid at 1 Hz, 200 ms, expert lead velocity.
+
+    - pick: static, linear at 0.2 and 0.4 m/s, reversal and jump at 0.2 m/s;
+    - insert: the table the seed asks for, a static fixture: bins (256, 1024, 2048, 8192) x clearance (3, 1, 0.5,
+      0.25 mm) x sensing noise (0, 2 mm) x mode (open_loop, hybrid) x compliance (off, on)."""
+    modes = ("open_loop", "hybrid")
+    s = tuple(range(2 if quick else seeds))
+    if task == "pick":
+        if quick:
+            return [Study("pick", modes, (1.0,), (200.0,), ("static", "linear"), (0.2,), (2048,), s, task="pick")]
+        return [Study("pick", modes, (1.0,), (200.0,), ("static",), (0.0,), (2048,), s, task="pick"),
+                Study("pick", modes, (1.0,), (200.0,), ("linear",), (0.2, 0.4), (2048,), s, task="pick"),
+                Study("pick", modes, (1.0,), (200.0,), ("reversal", "jump"), (0.2,), (2048,), s, task="pick")]
+    if task == "insert":
+        if quick:
+            return [Study("insert", modes, (1.0,), (200.0,), ("static",), (0.0,), (2048,), s, task="insert",
+                          clearance_mm=(1.0,), noise_m=(0.002,), compliance=(False, True))]
+        return [Study("insert", modes, (1.0,), (200.0,), ("static",), (0.0,), (256, 1024, 2048, 8192), s,
+                      task="insert", clearance_mm=(3.0, 1.0, 0.5, 0.25), noise_m=(0.0, 0.002),
+                      compliance=(False, True))]
+    return default_grid(quick, seeds)
+
+
 def cell_key(cell: dict, duration_s: float) -> str:
     text = json.dumps({**{k: cell.get(k) for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
+                       **({k: cell.get(k) for k in TASK_AXES} if cell.get("task", "reach") != "reach" else {}),
                        **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
                           if cell.get("source", "expert") != "expert" else {}),
@@ -167,10 +212,12 @@ def _source_and_world(cell: dict):
     from scenarios.sources import SourceSettings, build_source, scene_settings
 
     spec = cell.get("source", "expert")
+    task = cell.get("task", "reach")
+    contact = {} if task == "reach" else dict(task=task, clearance_mm=cell["clearance_mm"], noise_m=cell["noise_m"])
     if spec == "expert":
-        wkey = ("world", cell["target"], cell["speed_m_s"], spec)
+        wkey = ("world", cell["target"], cell["speed_m_s"], spec, json.dumps(contact, sort_keys=True))
         if wkey not in _CACHE:
-            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"])
+            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **contact)
         world = _CACHE[wkey]
         return make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=world), world
     skey = ("source", spec, json.dumps(cell.get("source_args") or {}, sort_keys=True), cell.get("checkpoint"),
@@ -179,11 +226,21 @@ def _source_and_world(cell: dict):
         _CACHE[skey] = build_source(SourceSettings(spec=spec, args=dict(cell.get("source_args") or {}),
                                                    checkpoint=cell.get("checkpoint") or None, preset=cell.get("preset")))
     source = _CACHE[skey]
-    wkey = ("world", cell["target"], cell["speed_m_s"], skey)
+    wkey = ("world", cell["target"], cell["speed_m_s"], skey, json.dumps(contact, sort_keys=True))
     if wkey not in _CACHE:  # the source's scenes (our policy's: two balls, its cameras and training plane)
-        scene = {"n_objects": 2, **scene_settings(source)}
+        scene = {"n_objects": 2, **scene_settings(source), **contact}
         _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **scene)
     return source, _CACHE[wkey]
+
+
+def _task_stack(cell: dict) -> dict:
+    """A contact task's stack settings (``task_stack_settings``); none for reach."""
+    task = cell.get("task", "reach")
+    if task == "reach":
+        return {}
+    from scenarios.world.tasks.registry import task_stack_settings
+
+    return task_stack_settings(task, bool(cell.get("compliance", False)))
 
 
 def run_cell(cell: dict, duration_s: float) -> dict:
@@ -208,7 +265,7 @@ def run_cell(cell: dict, duration_s: float) -> dict:
         sensor = _CACHE[skey]
     cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
                       duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0,
-                      receding_k=int(cell.get("s_steps") or 0))
+                      receding_k=int(cell.get("s_steps") or 0), **_task_stack(cell))
     controller = HybridController(cfg, model=_CACHE["model"])
     log = run_episode(world, source, controller, seed=cell["seed"], sensor=sensor)
     m = episode_metrics(log)
@@ -279,7 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="a small grid that finishes in under two minutes")
     p.add_argument("--seeds", type=int, default=10, help="seeds per cell of the default grid's lead and families studies "
                                                          "(the replan, rtc_grid, bins and perception studies use up to 3)")
-    p.add_argument("--duration-s", type=float, default=None, help="episode length (default 6 s, 4 s with --quick)")
+    p.add_argument("--duration-s", type=float, default=None,
+                   help="episode length (default 6 s; 4 s with --quick on reach)")
     p.add_argument("--backend", choices=("local", "ray"), default="local", help="process pool here, or a Ray cluster")
     p.add_argument("--workers", type=int, default=2, help="local backend: parallel processes")
     p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
@@ -298,10 +356,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="ws:// source: the convention its policy was trained in (libero, droid, mmact, or a JSON preset "
                         "file: README 'Conventions'); default: what the server declares")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from scenarios.world.tasks.registry import TASKS
+
+    p.add_argument("--task", choices=TASKS, default="reach",
+                   help="the task of the default grid: reach (the studies above), pick (open_loop vs hybrid on the "
+                        "conveyor: static, linear 0.2 / 0.4 m/s, reversal, jump) or insert (bins x clearance x noise x "
+                        "mode x compliance, static fixture). Default: reach")
     args = p.parse_args(argv)
     if args.seeds < 1 or args.workers < 1:
         p.error(f"--seeds and --workers must be >= 1, got {args.seeds} and {args.workers}")
-    duration_s = args.duration_s if args.duration_s is not None else (4.0 if args.quick else 6.0)
+    # a contact task needs its 6 s even in a quick run (a peg seats at 3-5 s)
+    duration_s = args.duration_s if args.duration_s is not None else (4.0 if args.quick and args.task == "reach" else 6.0)
     if not duration_s > 0:
         p.error(f"--duration-s must be > 0, got {duration_s}")
     try:
@@ -310,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
             spec = json.loads(text if text.startswith("[") or not Path(text).is_file() else Path(text).read_text())
             studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
         else:
-            studies = default_grid(args.quick, args.seeds)
+            studies = task_grid(args.task, args.quick, args.seeds)
         from scenarios.world.targets import KINDS
 
         for s in studies:

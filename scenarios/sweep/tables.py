@@ -25,11 +25,12 @@ ORDERS = {
 }
 # the axes that define a condition (with study and mode); episodes of one condition differ by seed only
 COND_AXES = ("source", "lead", "target", "speed_m_s", "replan_hz", "latency_ms", "d_steps", "s_steps", "bins",
-             "perception")
+             "perception", "task", "clearance_mm", "noise_m", "compliance")
 HEAD = {"source": "source", "lead": "lead", "target": "target", "speed_m_s": "speed [m/s]", "replan_hz": "replan [Hz]",
         "latency_ms": "latency [ms]", "d_steps": "d [steps]", "s_steps": "s [steps]", "bins": "bins",
-        "perception": "perception"}
-UNIT = {"speed_m_s": " m/s", "replan_hz": " Hz", "latency_ms": " ms"}
+        "perception": "perception", "task": "task", "clearance_mm": "clearance [mm]", "noise_m": "noise [m]",
+        "compliance": "compliance"}
+UNIT = {"speed_m_s": " m/s", "replan_hz": " Hz", "latency_ms": " ms", "clearance_mm": " mm", "noise_m": " m"}
 PREFIX = {"lead": "lead ", "d_steps": "d=", "s_steps": "s=", "bins": "bins="}
 # study -> (section title, the axes its table rows are indexed by; any other axis that varies is appended)
 STUDIES = {
@@ -45,6 +46,10 @@ STUDIES = {
     "bins": ("bins: quantization (static target)", ("bins",)),
     "jump": ("jump: the target teleports mid-chunk", ("replan_hz",)),
     "perception": ("perception: oracle vs camera target channel", ("perception",)),
+    "pick": ("pick: grasp the instructed cube on the conveyor and lift it (1 Hz, 200 ms, expert lead velocity)",
+             ("target", "speed_m_s")),
+    "insert": ("insert: bins x clearance x sensing noise x compliance (static fixture, 1 Hz, 200 ms)",
+               ("clearance_mm", "noise_m", "bins", "compliance")),
 }
 
 

@@ -19,7 +19,8 @@ Reward: minus the TCP-target distance (m) at the end of the step, plus ``success
 ``truncated`` at the episode's duration. ``info`` has the step's safety counts, rejections and tick counts (ticks run,
 QP failures and rescues, missed ticks, MPC failures, watchdog stops; the wall-clock tick times in
 ``env.unwrapped.last_tick_us``, or in ``info["tick_us"]`` with ``wall_clock_info=True``), and at
-the end of the episode ``info["episode"]``: the episode's metrics as ``python -m scenarios.moving_target`` reports them.
+the end of the episode ``info["episode"]``: the episode's metrics as ``python -m scenarios.moving_target`` reports them. With ``task="pick"`` (any main-job switch is a keyword) the scene is the pick task's and success is its own
+predicate (the instructed cube lifted 5 cm for 1 s); the reward's distance is then the TCP's to that cube.
 
 Every keyword setting is the main job's switch of the same name (``--target`` -> ``target``, ``--replan-hz`` ->
 ``replan_hz``, ...): the environment builds its stack and world exactly as the main job does.
@@ -145,7 +146,8 @@ class MovingTargetEnv(gymnasium.Env):
         scene_cameras = self.cameras or ("front",)
         self.world = make_world(args.target, args.speed, noise_m=args.noise_m, dropout=args.dropout,
                                 n_objects=args.objects or 2, plane_z_m=plane, instruction=args.instruction,
-                                image_size_px=int(image_size_px), cameras=scene_cameras)
+                                image_size_px=int(image_size_px), cameras=scene_cameras, task=args.task,
+                                clearance_mm=args.clearance_mm)
         self.sensor = make_sensor(args, self.world, self.config.dt_s)
         self.controller = HybridController(self.config)
         self.tokenizer = (ActionTokenizer(bins=self.config.bins, token_offset=VocabLayout(action_bins=self.config.bins).action_offset)
@@ -225,10 +227,15 @@ class MovingTargetEnv(gymnasium.Env):
         k1 = runner.k
         err = np.linalg.norm(log.ee_pos_m[k0:k1] - log.target_pos_m[k0:k1], axis=1)
         first_success = False
-        for inside in err < self._metrics.success_radius_m:  # the success hold, tick by tick
-            self._inside_run = self._inside_run + 1 if inside else 0
-            if self._inside_run >= self._hold_ticks and not self._succeeded:
-                self._succeeded = first_success = True
+        task_report = getattr(self.world, "task_report", None)
+        if task_report is not None:  # a contact task (task="pick") judges itself: its predicate, not the reach hold
+            first_success = bool(task_report()["success"]) and not self._succeeded
+            self._succeeded = self._succeeded or first_success
+        else:
+            for inside in err < self._metrics.success_radius_m:  # the success hold, tick by tick
+                self._inside_run = self._inside_run + 1 if inside else 0
+                if self._inside_run >= self._hold_ticks and not self._succeeded:
+                    self._succeeded = first_success = True
         distance = float(err[-1]) if len(err) else float("nan")
         reward = -distance + (self.success_bonus if first_success else 0.0)
         terminated = bool(self._succeeded and self.terminate_on_success)

@@ -98,6 +98,11 @@ class SceneConfig:
         camera_names: cameras rendered by ``SimWorld.render`` (subset of ``AVAILABLE_CAMERAS``).
         gripper_kp: gripper position gain, N/m (force on each finger per metre of opening error).
         gripper_dampratio: damping ratio of the gripper position actuator (1 = critical).
+        gripper_force_n: the most force the gripper's actuator applies on each finger, N (the Franka Hand grasps
+            with a set force; 100 is past anything the position gain asks in reach).
+        task: what the scene is for (``scenarios.world.tasks``): ``reach`` (mocap balls, no contact), ``pick``
+            (cubes on a conveyor, fingertip pads), ``insert`` (a peg in the fingers, a fixture with a hole).
+        clearance_mm: insert: the hole's clearance over the peg, per side, mm.
     """
 
     dt_s: float = 0.001
@@ -107,6 +112,9 @@ class SceneConfig:
     camera_names: tuple[str, ...] = ("front",)
     gripper_kp: float = 200.0
     gripper_dampratio: float = 1.0
+    gripper_force_n: float = 100.0
+    task: str = "reach"
+    clearance_mm: float = 1.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt_s) and self.dt_s > 0):
@@ -126,8 +134,12 @@ class SceneConfig:
                 raise ValueError(f"SceneConfig.camera_names: unknown camera {name!r}; choose from {AVAILABLE_CAMERAS}")
         if not (np.isfinite(self.gripper_kp) and self.gripper_kp > 0):
             raise ValueError(f"SceneConfig.gripper_kp must be > 0 N/m, got {self.gripper_kp!r}")
+        if not (np.isfinite(self.gripper_force_n) and self.gripper_force_n > 0):
+            raise ValueError(f"SceneConfig.gripper_force_n must be > 0 N, got {self.gripper_force_n!r}")
         if not (np.isfinite(self.gripper_dampratio) and self.gripper_dampratio >= 0):
             raise ValueError(f"SceneConfig.gripper_dampratio must be >= 0, got {self.gripper_dampratio!r}")
+        if not (np.isfinite(self.clearance_mm) and self.clearance_mm > 0):
+            raise ValueError(f"SceneConfig.clearance_mm must be > 0 mm, got {self.clearance_mm!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -234,6 +246,10 @@ def build_panda_spec(config: SceneConfig = SceneConfig()) -> mujoco.MjSpec:
     _robot_looks(spec)
     _environment(spec.worldbody, spec)
     _targets_and_cameras(spec.worldbody, config)
+    if config.task != "reach":  # the contact tasks' bodies, pads and contact settings (scenarios.world.tasks)
+        from scenarios.world.tasks.registry import task_by_name
+
+        task_by_name(config.task).add_to_scene(spec, config)
     return spec
 
 
@@ -276,7 +292,7 @@ def _gripper(spec: mujoco.MjSpec, config: SceneConfig) -> None:
     grip.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
     grip.ctrlrange = [0.0, GRIPPER_MAX_M]
     grip.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    grip.forcerange = [-100.0, 100.0]
+    grip.forcerange = [-float(config.gripper_force_n), float(config.gripper_force_n)]
 
 
 
@@ -319,8 +335,8 @@ def _environment(world, spec: mujoco.MjSpec) -> None:
 
 def _targets_and_cameras(world, config: SceneConfig) -> None:
     """The mocap target spheres (no collision) and the cameras."""
-    # mocap targets (no collision)
-    for i in range(config.n_objects):
+    # mocap targets (no collision): the reach task's balls
+    for i in range(config.n_objects if config.task == "reach" else 0):
         body = world.add_body(name=TARGET_BODIES[i], mocap=True, pos=[0.5, -0.1 + 0.2 * i, 0.3])
         body.add_geom(name=f"{TARGET_BODIES[i]}_geom", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[TARGET_RADIUS_M, 0, 0],
                       rgba=list(TARGET_RGBA[i]), contype=0, conaffinity=0)

@@ -1,0 +1,69 @@
+"""Compliance as one QP task (``StackConfig.compliance``, ``--compliance``): the TCP as a spring-damper about its
+reference, stiff or soft per axis of the tool frame, whose force is capped.
+
+Stiff tracking (``TcpPositionTask``: 400 1/s^2 on the error, saturated at 10 cm) asks the arm for whatever force
+closes the error: a waypoint quantized a few millimetres into a surface becomes a push of up to about 100 N. The
+impedance task asks for the acceleration that makes the TCP behave like a spring ``K`` (N/m, per tool axis) and a
+damper on the robot's own task-space inertia ``Lambda = (J M^-1 J')^-1``: ``a_des = a_ref + Lambda^-1 f`` with
+``f = sat(K e + D e_dot)``, the spring-damper's force clipped per tool axis at ``force_max_n``. Held still by a contact,
+the torque the QP sends (``M a_des + h``) makes the TCP push with ``f``: never more than the cap per axis,
+which is how the contact-force limit is kept in the QP. The damping is ``2 zeta sqrt(K m)`` for a nominal ``m``.
+It replaces the TCP position task (which the stack then weighs 0); orientation, posture and the limits are unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.qp.state import Objective, QPState
+from controllers.qp.tasks import tracking_cost
+
+
+@dataclass(frozen=True)
+class ImpedanceTask:
+    """Attributes:
+        stiffness_n_m: spring per tool axis (x, y across and along the fingers' closing, z the approach), N/m.
+        force_max_n: the spring-damper's force cap per tool axis, N (the contact-force limit kept in the QP).
+        damping_ratio: zeta of the damper (1 = critical for ``nominal_mass_kg``).
+        nominal_mass_kg: the apparent mass the damping is tuned for, kg.
+        weight: cost per (m/s^2)^2.
+    """
+
+    stiffness_n_m: tuple[float, float, float] = (500.0, 500.0, 800.0)
+    force_max_n: float = 20.0
+    damping_ratio: float = 1.0
+    nominal_mass_kg: float = 3.0
+    weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        k = np.asarray(self.stiffness_n_m, dtype=float)
+        if k.shape != (3,) or not np.all(np.isfinite(k)) or np.any(k <= 0):
+            raise ValueError(f"ImpedanceTask.stiffness_n_m must be three stiffnesses > 0 N/m, got {self.stiffness_n_m!r}")
+        for name in ("force_max_n", "damping_ratio", "nominal_mass_kg", "weight"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"ImpedanceTask.{name} must be a finite number > 0, got {v!r}")
+
+    def force_n(self, state: QPState) -> np.ndarray:
+        """The spring-damper's force (3,) on the TCP, world frame, N."""
+        terms, ref = state.terms, state.ref
+        rot = terms.rot  # tool -> world
+        k = np.asarray(self.stiffness_n_m, dtype=float)
+        d = 2.0 * self.damping_ratio * np.sqrt(k * self.nominal_mass_kg)
+        e_tool = rot.T @ (ref.pos_m - terms.pos_m)
+        ev_tool = rot.T @ (ref.vel_m_s - terms.vel[:3])
+        f_tool = np.clip(k * e_tool + d * ev_tool, -self.force_max_n, self.force_max_n)
+        return rot @ f_tool
+
+    def desired_acc(self, state: QPState) -> np.ndarray:
+        """``a_ref + Lambda^-1 f``, m/s^2 (``Lambda^-1 = J M^-1 J'`` over the TCP's linear rows)."""
+        terms = state.terms
+        jp = terms.J[:3]
+        lambda_inv = jp @ np.linalg.solve(terms.M, jp.T)
+        return state.ref.acc_m_s2 + lambda_inv @ self.force_n(state)
+
+    def cost(self, state: QPState) -> Objective:
+        t = state.terms
+        return tracking_cost(t.J[:3], t.dJv[:3], self.desired_acc(state), self.weight)

@@ -1,0 +1,61 @@
+"""The contact-force guard: the safety layer that keeps the measured contact force under the limit, in every mode.
+
+A position-tracking arm pressed against something it cannot pass (a peg caught on a chamfer, a cube pushed into the
+belt) builds force at its stiffness times the reference's overshoot: a reference descending at 4 cm/s into a jam adds
+about 40 N a second. libfranka stops the arm when its collision thresholds are crossed (``setCollisionBehavior``),
+so a command that drives the force over ``StackConfig.contact_force_limit_n`` is one the robot would reject. The guard
+is an admittance on the reference, from the measured external force at the TCP (``RobotState.wrench_ext``, libfranka's
+``O_F_ext_hat_K``): above ``GUARD_FRACTION`` of the limit the reference yields along the measured force at
+``YIELD_M_S_PER_N`` per newton over; below it the yield relaxes back with ``RELAX_TAU_S``. A world that measures no
+wrench (reach) never moves it: the reference passes unchanged, bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: the guard acts above this fraction of the contact-force limit
+GUARD_FRACTION = 0.5
+#: how fast the reference yields per newton over the guard's threshold, m/s/N (arm stiffness about 1000 N/m: a loop
+#: time constant near 0.1 s)
+YIELD_M_S_PER_N = 0.01
+#: the yield relaxes back with this time constant once the force is under the threshold, s
+RELAX_TAU_S = 0.5
+#: the largest yield, m
+MAX_YIELD_M = 0.05
+
+
+class ContactForceGuard:
+    """See the module. ``offset_m`` is the reference's current yield (world frame, m)."""
+
+    def __init__(self, limit_n: float, dt_s: float) -> None:
+        self.threshold_n = GUARD_FRACTION * float(limit_n)
+        self.dt_s = float(dt_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self.offset_m = np.zeros(3)
+        self.active = False
+        self.yield_ticks = 0
+
+    def update(self, force_n: np.ndarray | None) -> None:
+        """One tick with the measured external force on the robot at the TCP (N, world frame; None: not measured)."""
+        if force_n is None:
+            return
+        f = np.asarray(force_n, dtype=float)[:3]
+        norm = float(np.linalg.norm(f))
+        if norm > self.threshold_n:
+            self.offset_m = self.offset_m + self.dt_s * YIELD_M_S_PER_N * (norm - self.threshold_n) * (f / norm)
+            n = float(np.linalg.norm(self.offset_m))
+            if n > MAX_YIELD_M:
+                self.offset_m *= MAX_YIELD_M / n
+            self.active = True
+            self.yield_ticks += 1
+        elif self.active:
+            self.offset_m = self.offset_m * (1.0 - self.dt_s / RELAX_TAU_S)
+            if float(np.linalg.norm(self.offset_m)) < 1e-6:
+                self.offset_m, self.active = np.zeros(3), False
+
+    def apply(self, pos_m: np.ndarray) -> np.ndarray:
+        """The reference position with the yield (``pos_m`` itself while the guard is idle)."""
+        return pos_m + self.offset_m if self.active else pos_m

@@ -1,0 +1,37 @@
+"""The task protocol (``--task``): what a task is to the rest of the project. One file per task in this package
+implements it, ``registry.TASK_PATHS`` names them; the loop and the executors know no task: the world a task builds
+reports its figures (``task_report``) and the contact wrench (``RobotState.wrench_ext``), and the metrics read them."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from scenarios.world.targets import TargetSpec
+
+
+class Task(Protocol):
+    """A task: its scene, its world (reset from a seed, the 100 Hz measurement channel, the success predicate and
+    figures in ``task_report()``), its target course and its scripted expert.
+
+    Attributes:
+        name: the ``--task`` name.
+        tcp_floor_m: the lowest TCP reference the task needs, m (None: the stack's default).
+        world_class: the ``SimWorld`` subclass of its scene (constructed as ``SimWorld`` is).
+        contact: whether the robot touches things (the stack then checks the contact force).
+        pull_axes: the axes the hybrid layer retargets a chunk on (``controllers.retarget.PULL_AXES``).
+    """
+
+    name: str
+    tcp_floor_m: float | None
+    world_class: type
+    contact: bool
+    pull_axes: str
+
+    def add_to_scene(self, spec, config) -> None:
+        """Add the task's bodies, pads and contact settings to the MjSpec of the Panda scene."""
+
+    def target_spec(self, kind: str, speed_m_s: float, plane_z_m: float = 0.0) -> TargetSpec:
+        """The course of the task's moving thing (the ball, the carrier, the fixture) for a motion family."""
+
+    def make_expert(self, bins: int, horizon: int, dt_s: float, lead: str, world=None):
+        """The task's scripted expert (a ``ChunkSource``)."""

@@ -1,0 +1,119 @@
+"""The insert task's scripted expert: over the hole (with its lead), down to the mouth, and in, as waypoints with the
+gripper closed on the peg, through the same action tokenizer as every other chunk.
+
+It reads one observation (the TCP, where the hole's mouth is and, with ``lead velocity``, where it was 0.1 s earlier)
+and plans from there, nothing remembered: above the mouth (the peg's bottom ``ABOVE_M`` over it) it descends
+``INSERT_SPEED_M_S`` into the hole to ``PUSH_M`` below the seat; elsewhere it first moves there. The peg's bottom is
+taken to be ``PEG_BELOW_TCP_M`` under the TCP, where the task's reset puts it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mmact_ctrl.chunk import ActionChunk, Observation
+from policy.action_tokenizer import ActionTokenizer
+from policy.vocab import VocabLayout
+from scenarios.world.expert import LEADS, min_jerk
+from scenarios.world.tasks.insert_scene import HOLE_DEPTH_M, PEG_BELOW_TCP_M
+
+#: the approach ends with the peg's bottom this far over the mouth, m
+ABOVE_M = 0.015
+#: the TCP within this of its spot over the mouth (horizontally) starts the insertion, m
+OVER_XY_M = 0.003
+#: the insertion's speed, m/s, and how far past the hole's bottom it aims (a light push on the seat), m
+INSERT_SPEED_M_S = 0.04
+PUSH_M = 0.0015
+#: a two-frame speed above this is a jump, not a motion, m/s
+MAX_LEAD_SPEED_M_S = 0.3
+
+
+@dataclass(frozen=True)
+class InsertExpertConfig:
+    """Attributes: horizon (waypoints), dt_s (their spacing, s), approach_speed_m_s (average TCP speed of the move
+    over the hole), min_approach_s (s), lead (``none`` or ``velocity``)."""
+
+    horizon: int = 16
+    dt_s: float = 0.1
+    approach_speed_m_s: float = 0.3
+    min_approach_s: float = 0.5
+    lead: str = "velocity"
+
+    def __post_init__(self) -> None:
+        if self.lead not in LEADS:
+            raise ValueError(f"InsertExpertConfig.lead must be one of {LEADS}, got {self.lead!r}")
+        if self.horizon < 1 or not self.dt_s > 0:
+            raise ValueError(f"InsertExpertConfig: horizon >= 1 and dt_s > 0, got {self.horizon}, {self.dt_s}")
+
+
+class InsertExpert:
+    """``ChunkSource`` of the insert task (see the module)."""
+
+    needs_image = False
+
+    def __init__(self, config: InsertExpertConfig = InsertExpertConfig(), tokenizer: ActionTokenizer | None = None):
+        self.config, self.tokenizer = config, tokenizer
+
+    @property
+    def chunk_dt_s(self) -> float:
+        return self.config.dt_s
+
+    @property
+    def action_token_range(self) -> tuple[int, int] | None:
+        tok = self.tokenizer
+        return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
+
+    def plan(self, obs: Observation) -> ActionChunk:
+        cfg = self.config
+        times = cfg.dt_s * np.arange(1, cfg.horizon + 1)
+        mouth = np.asarray(obs.target_pos_m, dtype=float)
+        course = mouth + times[:, None] * self._velocity(obs)  # where the mouth will be at each waypoint's time
+        tcp = np.asarray(obs.ee_pos_m, dtype=float)
+        over = course + np.array([0.0, 0.0, PEG_BELOW_TCP_M + ABOVE_M])  # the TCP's spot over the mouth
+        entered = tcp[2] < mouth[2] + PEG_BELOW_TCP_M + ABOVE_M + 0.005
+        if entered and np.hypot(*(tcp - mouth)[:2]) < OVER_XY_M + 0.002 * (tcp[2] < over[0, 2] - 0.002):
+            pos = self._insert(tcp, course, times)
+        else:
+            pos = self._approach(tcp, over, times)
+        a = np.zeros((len(times), 7))
+        a[:, :3] = pos
+        return self._finish(a, obs)
+
+    def _velocity(self, obs: Observation) -> np.ndarray:
+        prev, gap = obs.target_prev_pos_m, float(obs.frame_gap_s)
+        if self.config.lead == "none" or prev is None or not gap > 0:
+            return np.zeros(3)
+        v = (np.asarray(obs.target_pos_m, dtype=float) - np.asarray(prev, dtype=float)) / gap
+        v[2] = 0.0
+        return v if np.all(np.isfinite(v)) and np.linalg.norm(v) <= MAX_LEAD_SPEED_M_S else np.zeros(3)
+
+    def _approach(self, tcp: np.ndarray, over: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """A minimum-jerk move to the spot over the mouth, then along the mouth's course there."""
+        cfg = self.config
+        t_app = max(cfg.min_approach_s, float(np.linalg.norm(over[-1] - tcp)) / cfg.approach_speed_m_s)
+        s = min_jerk(times / t_app)[:, None]
+        return tcp + s * (over - tcp)
+
+    def _insert(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """Straight down over the mouth's course at ``INSERT_SPEED_M_S`` to ``PUSH_M`` past the seat; once the peg is
+        in the hole, straight down where the TCP is (the hole guides it; a noisy measurement must not drag it)."""
+        bottom_z = course[:, 2] - HOLE_DEPTH_M + PEG_BELOW_TCP_M - PUSH_M
+        pos = course.copy()
+        if tcp[2] < course[0, 2] + PEG_BELOW_TCP_M:  # the peg is in the hole: it guides the peg, straight down from here
+            pos[:, :2] = tcp[:2]
+        pos[:, 2] = np.maximum(tcp[2] - INSERT_SPEED_M_S * times, bottom_z)
+        return pos
+
+    def _finish(self, actions: np.ndarray, obs: Observation) -> ActionChunk:
+        if self.tokenizer is None:
+            return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=obs.t0_s)
+        waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)
+        return ActionChunk(waypoints=waypoints, dt_s=self.config.dt_s, t0_s=obs.t0_s, tokens=tokens, n_clipped=n_clipped)
+
+
+def make_insert_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, lead: str = "velocity") -> InsertExpert:
+    """The insert expert, its chunks quantized through the shared action tokenizer (bins 0: not quantized)."""
+    tokenizer = ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
+    return InsertExpert(InsertExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead), tokenizer)

@@ -1,0 +1,203 @@
+"""``pick``: grasp the instructed cube while a conveyor carries it, and lift it.
+
+Two cubes (4.5 cm, 0.1 kg, free joints) ride a conveyor (``pick_scene``) whose velocity follows the episode's motion
+family at ``--speed``: the instructed cube's course is the motion's (the carrier's velocity is the motion's), the
+other rides beside it. The 100 Hz target channel measures the instructed cube's position (with the same noise,
+dropout and latency models as reach). Success: the instructed cube lifted at least 5 cm above the carrier and held
+there for 1 s. Figures (``task_report``): time to grasp, gripper closings, drops, wrong object, the cube's speed at
+the grasp, peak contact force.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from scenarios.world.panda_scene import GRIPPER_MAX_M, TARGET_COLORS, SceneConfig
+from scenarios.world.sim_world import SimWorld
+from scenarios.world.targets import JumpMotion, TargetSpec, make_motion, plane_workspace
+from scenarios.world.tasks.contact import external_wrench, robot_geom_mask
+from scenarios.world.tasks.grip import slew
+from scenarios.world.tasks.pick_scene import (BELT_GEOM, CUBE_BODIES, CUBE_HALF_M, CUBE_REST_Z_M, add_pick_scene)
+from scenarios.world.tasks.progress import PickProgress
+
+#: success: lifted this far above the carrier, for this long
+LIFT_M = 0.05
+HOLD_S = 1.0
+#: the distractor starts this far from the instructed cube, m
+DISTRACTOR_GAP_M = (0.12, 0.2)
+INSTRUCTION_TEMPLATES: tuple[str, ...] = (
+    "pick up the {color} cube",
+    "grasp the {color} cube and lift it",
+    "lift the {color} block",
+)
+#: the robot's bodies (their contacts make the external wrench)
+ROBOT_BODY_PREFIX = "panda_"
+
+
+def pick_target_spec(kind: str, speed_m_s: float) -> TargetSpec:
+    """The carrier's course: the motion family on the belt, at the cubes' resting height (a flat workspace: linear
+    motions stay horizontal), inside the belt with a cube's margin."""
+    base = TargetSpec(kind=kind, speed_m_s=speed_m_s)
+    low, high = plane_workspace(base.workspace_low_m, base.workspace_high_m, CUBE_REST_Z_M, thickness_m=1e-6)
+    return TargetSpec(kind=kind, speed_m_s=speed_m_s, workspace_low_m=low, workspace_high_m=high,
+                      jump_dist_m=min(base.jump_dist_m, 0.15))
+
+
+class PickWorld(SimWorld):
+    """The pick scene behind ``mmact_ctrl.world.World`` (see the module)."""
+
+    def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0,
+                 instruction: str | None = None) -> None:
+        super().__init__(scene, target, noise_m=noise_m, dropout=dropout, instruction=instruction)
+        m = self.model
+        self._cube_q = [int(m.jnt_qposadr[m.body_jntadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)]])
+                        for b in CUBE_BODIES[: scene.n_objects]]
+        self._cube_v = [int(m.jnt_dofadr[m.body_jntadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)]])
+                        for b in CUBE_BODIES[: scene.n_objects]]
+        self._belt = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, BELT_GEOM)
+        robot = {b for b in range(m.nbody) if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b).startswith(ROBOT_BODY_PREFIX)}
+        self._robot_geom = robot_geom_mask(m, robot)
+        self._motion = None
+        self._gripper_cmd_m = GRIPPER_MAX_M
+        self._jumps: list[tuple[float, np.ndarray]] = []
+        self.progress = PickProgress(LIFT_M, HOLD_S, CUBE_REST_Z_M, m.opt.timestep)
+
+    # ---- the episode --------------------------------------------------------------------------------------------
+    def reset(self, seed: int, target_index: int | None = None):
+        """Arm at home, fingers open, the cubes on the belt: the instructed one at the course's start, the other
+        beside it; the instruction names the instructed cube's colour."""
+        rng = np.random.default_rng([int(seed), 0])
+        motion = make_motion(self.target, int(seed))
+        self._motion = motion
+        self._motions = [motion] * self.n_objects  # both ride the one carrier
+        if target_index is None and self.fixed_target_index is not None:
+            target_index = self.fixed_target_index
+        self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
+        template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
+        self.instruction = self.fixed_instruction or template.format(color=TARGET_COLORS[self.target_index])
+        self._meas_rng = np.random.default_rng([int(seed), 1])
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        d.qpos[self._arm_qpos] = self._home_q()
+        d.qpos[self._finger_qpos] = GRIPPER_MAX_M / 2.0
+        d.ctrl[self._grip_act] = GRIPPER_MAX_M
+        start = motion.pos_m(0.0)
+        for i, adr in enumerate(self._cube_q):
+            pos = start if i == self.target_index else self._beside(start, rng)
+            d.qpos[adr:adr + 3] = [pos[0], pos[1], CUBE_REST_Z_M]
+            d.qpos[adr + 3:adr + 7] = [1.0, 0.0, 0.0, 0.0]
+        self._jumps = self._jump_steps(motion)
+        self._set_belt(0.0)
+        mujoco.mj_forward(m, d)
+        self._kinematics_stale = False
+        self.progress.reset(self.target_index)
+        self._gripper_cmd_m = GRIPPER_MAX_M
+        return self.state()
+
+    def _home_q(self) -> np.ndarray:
+        from controllers.robot_description import HOME_Q_RAD
+
+        return np.asarray(HOME_Q_RAD)
+
+    def _beside(self, start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A start for the distractor ``DISTRACTOR_GAP_M`` from ``start``, inside the course's box."""
+        low, high = self.target.low, self.target.high
+        for _ in range(1000):
+            angle, gap = rng.uniform(0.0, 2 * np.pi), rng.uniform(*DISTRACTOR_GAP_M)
+            p = start + gap * np.array([np.cos(angle), np.sin(angle), 0.0])
+            if np.all(p[:2] >= low[:2]) and np.all(p[:2] <= high[:2]):
+                return p
+        raise RuntimeError("no room for the second cube on the belt")  # pragma: no cover - the belt is large
+
+    @staticmethod
+    def _jump_steps(motion) -> list[tuple[float, np.ndarray]]:
+        """(time, displacement) of each teleport of a jump motion: the carrier jumps the instructed cube."""
+        if not isinstance(motion, JumpMotion):
+            return []
+        return [(t, motion.pos_m(t + 1e-6) - motion.pos_m(t - 1e-6)) for t in motion.jump_times_s]
+
+    def _set_belt(self, t_s: float) -> None:
+        """The carrier's velocity at ``t_s``: the motion's (a jump motion rests between its teleports)."""
+        h = self.dt_s
+        v = (self._motion.pos_m(t_s + h) - self._motion.pos_m(t_s)) / h if not self._jumps else np.zeros(3)
+        self.model.geom_surfacevel[self._belt, :2] = v[:2]
+
+    # ---- the World protocol ---------------------------------------------------------------------------------
+    def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
+        # the Franka Hand moves its fingers at most GRIPPER_SPEED_M_S (the opening's rate): the command is slewed
+        self._gripper_cmd_m = slew(self._gripper_cmd_m, gripper_m, self.dt_s)
+        super().step(tau_nm, self._gripper_cmd_m)
+        d = self.data
+        t = float(d.time)
+        if self._jumps and t >= self._jumps[0][0]:
+            _, delta = self._jumps.pop(0)
+            adr = self._cube_q[self.target_index]
+            if d.qpos[adr + 2] < CUBE_REST_Z_M + 0.005:  # on the carrier (not in the hand): it jumps with it
+                d.qpos[adr:adr + 2] += delta[:2]
+        self._set_belt(t)
+        self.progress.update(t, self._cube_z(), gripper_m, float(np.linalg.norm(self.model.geom_surfacevel[self._belt, :2])),
+                             self._last_force_n())
+
+    def _place_objects(self, t_s: float, placements) -> None:
+        """Nothing to place: the cubes are physical (the base class moves mocap balls)."""
+
+    def _cube_z(self) -> np.ndarray:
+        return np.array([self.data.qpos[a + 2] for a in self._cube_q])
+
+    def _last_force_n(self) -> float:
+        w = external_wrench(self.model, self.data, self._robot_geom, self.data.site_xpos[self._tcp])
+        return float(np.linalg.norm(w[:3]))
+
+    def state(self):
+        s = super().state()
+        w = external_wrench(self.model, self.data, self._robot_geom, s.ee_pos_m)
+        return type(s)(t_s=s.t_s, q_rad=s.q_rad, dq_rad_s=s.dq_rad_s, gripper_m=s.gripper_m, ee_pos_m=s.ee_pos_m,
+                       wrench_ext=w)
+
+    def target_pos_m(self) -> np.ndarray:
+        """The instructed cube's centre now, m."""
+        adr = self._cube_q[self.target_index]
+        return self.data.qpos[adr:adr + 3].copy()
+
+    def objects_pos_m(self) -> np.ndarray:
+        return np.array([self.data.qpos[a:a + 3] for a in self._cube_q])
+
+    def snapshot(self) -> dict:
+        d = self.data
+        return {"time": float(d.time), "qpos": d.qpos.copy(), "mocap_pos": d.mocap_pos.copy(),
+                "mocap_quat": d.mocap_quat.copy()}
+
+    def task_report(self) -> dict:
+        """The task's figures of the episode so far (``PickProgress``)."""
+        return self.progress.report(self.target_index)
+
+
+class PickTask:
+    """The pick task (see the module)."""
+
+    name = "pick"
+    #: the lowest TCP reference, m: the grasp puts the TCP 6 mm above a cube's centre (3.05 cm); the fingertips reach
+    #: about 1.5 cm below the TCP, the belt's top is at 2 mm
+    tcp_floor_m = 0.025
+    contact = True
+    #: the gripper's position gain, N/m: 1000 squeezes a 4.5 cm cube with about 22 N a finger (the Franka Hand holds
+    #: up to 70 N; reach's 200 N/m, about 4.5 N, let a cube creep 5 mm in the pads through a 0.5 m/s swing)
+    scene_overrides = {"gripper_kp": 1000.0}
+    #: the axes the hybrid layer retargets a chunk on (``controllers.retarget.PULL_AXES``)
+    pull_axes = "xy"
+    world_class = PickWorld
+
+    def add_to_scene(self, spec, config: SceneConfig) -> None:
+        add_pick_scene(spec, config)
+
+    def target_spec(self, kind: str, speed_m_s: float, plane_z_m: float = 0.0) -> TargetSpec:
+        return pick_target_spec(kind, speed_m_s)
+
+    def make_expert(self, bins: int, horizon: int, dt_s: float, lead: str, world=None):
+        from scenarios.world.tasks.pick_expert import make_pick_expert
+
+        return make_pick_expert(bins=bins, horizon=horizon, dt_s=dt_s, lead=lead, world=world)
+
+
+__all__ = ["CUBE_HALF_M", "HOLD_S", "LIFT_M", "PickTask", "PickWorld", "pick_target_spec"]

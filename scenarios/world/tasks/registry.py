@@ -1,0 +1,33 @@
+"""The tasks by name (``--task``): ``reach`` (today's), ``pick``, ``insert``; one file each in this package."""
+
+from __future__ import annotations
+
+import importlib
+
+#: every task, by name: ``module:class``
+TASK_PATHS: dict[str, str] = {
+    "reach": "scenarios.world.tasks.reach:ReachTask",
+    "pick": "scenarios.world.tasks.pick:PickTask",
+    "insert": "scenarios.world.tasks.insert:InsertTask",
+}
+TASKS: tuple[str, ...] = tuple(TASK_PATHS)
+
+
+def task_by_name(name: str):
+    """The task ``name`` (a one-line ``ValueError`` naming the tasks otherwise)."""
+    if name not in TASK_PATHS:
+        raise ValueError(f"unknown task {name!r}: choose one of {', '.join(TASKS)}")
+    module, _, cls = TASK_PATHS[name].partition(":")
+    return getattr(importlib.import_module(module), cls)()
+
+
+def task_stack_settings(name: str, compliance: bool = False) -> dict:
+    """The ``StackConfig`` settings a task needs: its TCP floor and the axes a chunk is retargeted on, and
+    ``compliance``; none for reach (its stack is as it always was)."""
+    if name == "reach" and not compliance:
+        return {}
+    from controllers.retarget import RetargetConfig
+
+    task = task_by_name(name)
+    return {**({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
+            "retarget": RetargetConfig(pull_axes=task.pull_axes), "compliance": bool(compliance)}
