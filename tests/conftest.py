@@ -4,6 +4,24 @@ import pytest
 import torch
 
 
+@pytest.fixture(scope="module")
+def make_test_world():
+    """A factory of the main job's worlds (``scenarios.world.factory.make_world``), closed when the module is done: a
+    test file's ``world`` fixture is one line over it."""
+    from scenarios.world.factory import make_world
+
+    made = []
+
+    def make(target: str = "linear", speed_m_s: float = 0.2, **kw):
+        w = make_world(target, speed_m_s, **kw)
+        made.append(w)
+        return w
+
+    yield make
+    for w in made:
+        w.close()
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _one_torch_thread():
     """One intra-op thread: on a shared 2-core machine oversubscription makes small torch ops ~30x slower."""

@@ -12,7 +12,7 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.mpc_worker import InlineMPC
 from mmact_ctrl.runner import EpisodeRunner
-from scenarios.world.factory import make_expert, make_world
+from scenarios.world.factory import make_expert
 
 
 class OnTime:
@@ -59,10 +59,8 @@ def _trace(controller: HybridController, events: list) -> None:
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world("linear", 0.2, n_objects=1)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("linear", 0.2, n_objects=1)
 
 
 def _episode(world, deadline, duration_s: float = 0.5, seed: int = 3):

@@ -19,8 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def world():
-    return make_world(target="linear", speed_m_s=0.2)
+def world(make_test_world):
+    return make_test_world("linear", 0.2)
 
 
 def _strings(path: Path) -> set[str]:

@@ -13,7 +13,7 @@ from controllers.robot_model import PandaModel
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.world.factory import make_expert, make_world
+from scenarios.world.factory import make_expert
 from scenarios.faults.injectors import (
     FAULTS,
     UNREACHABLE_POS_M,
@@ -37,10 +37,8 @@ _RESULTS: dict = {}
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world("linear", 0.2, n_objects=2)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("linear", 0.2, n_objects=2)
 
 
 @pytest.fixture(scope="module")

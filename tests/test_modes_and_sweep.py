@@ -13,15 +13,13 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.world.factory import make_expert, make_world
+from scenarios.world.factory import make_expert
 from scenarios.sweep import Study, main as sweep_main
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world(target="linear", speed_m_s=0.2)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("linear", 0.2)
 
 
 def test_inpaint_freezes_the_running_waypoints(world):

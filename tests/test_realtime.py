@@ -28,10 +28,8 @@ PACED = RealtimeConfig(fifo_priority=10)
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world("static", 0.0, n_objects=1)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("static", 0.0, n_objects=1)
 
 
 #: the tries a wall-clock test gets: one episode, and more while the host stalled

@@ -9,14 +9,12 @@ from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
 from mmact_ctrl.runner import EpisodeRunner
-from scenarios.world.factory import make_expert, make_world
+from scenarios.world.factory import make_expert
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world("reversal", 0.2, n_objects=2)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("reversal", 0.2, n_objects=2)
 
 
 def _same(a, b):

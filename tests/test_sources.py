@@ -32,10 +32,8 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def world():
-    w = make_world("static", 0.0, n_objects=1)
-    yield w
-    w.close()
+def world(make_test_world):
+    return make_test_world("static", 0.0, n_objects=1)
 
 
 def _observation(model, q):

@@ -28,23 +28,14 @@ conditions where the control layer adds nothing, and links the PNG figures.
 
 from __future__ import annotations
 
-import argparse
-import csv
 import hashlib
 import json
 import math
 import sys
-import time
 from dataclasses import dataclass
 from itertools import product
-from pathlib import Path
-
-import numpy as np
 
 from mmact_ctrl.config import MODES
-from mmact_ctrl.executors import make_executor
-from mmact_ctrl.sources.contract import SourceError, require_capabilities
-from scenarios.sources import build_source, close_source, settings_from_args, source_spec_arg
 
 AXES: tuple[str, ...] = ("study", "mode", "replan_hz", "latency_ms", "target", "speed_m_s", "bins", "seed", "perception",
                          "lead", "d_steps", "s_steps")
@@ -199,268 +190,15 @@ def cell_key(cell: dict, duration_s: float) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
-# ---- running one cell (in a worker process) ------------------------------------------------
+# ---- the study's other parts live beside this module: one cell (``cells``), the backends (``backends``), the
+# command line and results.csv (``cli``); every name stays importable from here. (The docstring above is the
+# command line's description.)
+from scenarios.sweep.cells import _CACHE, _run_and_store, _source_and_world, _task_stack, run_cell  # noqa: E402,F401
+from scenarios.sweep.backends import run_local, run_ray  # noqa: E402
+from scenarios.sweep.cli import main, write_csv  # noqa: E402
 
-_CACHE: dict = {}
-
-
-def _source_and_world(cell: dict):
-    """The cell's chunk source and world, built once per process (``scenarios.sources``): the expert with the cell's
-    bins and lead in a world of the cell's motion; any other source (our policy, ``module:factory``, ``ws://``) in
-    the scenes it asks for."""
-    from scenarios.world.factory import make_expert, make_world
-    from scenarios.sources import SourceSettings, build_source, scene_settings
-
-    spec = cell.get("source", "expert")
-    task = cell.get("task", "reach")
-    contact = {} if task == "reach" else dict(task=task, clearance_mm=cell["clearance_mm"], noise_m=cell["noise_m"])
-    if spec == "expert":
-        wkey = ("world", cell["target"], cell["speed_m_s"], spec, json.dumps(contact, sort_keys=True))
-        if wkey not in _CACHE:
-            _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **contact)
-        world = _CACHE[wkey]
-        return make_expert(bins=cell["bins"], lead=cell.get("lead", "velocity"), world=world), world
-    skey = ("source", spec, json.dumps(cell.get("source_args") or {}, sort_keys=True), cell.get("checkpoint"),
-            cell.get("preset"))
-    if skey not in _CACHE:
-        _CACHE[skey] = build_source(SourceSettings(spec=spec, args=dict(cell.get("source_args") or {}),
-                                                   checkpoint=cell.get("checkpoint") or None, preset=cell.get("preset")))
-    source = _CACHE[skey]
-    wkey = ("world", cell["target"], cell["speed_m_s"], skey, json.dumps(contact, sort_keys=True))
-    if wkey not in _CACHE:  # the source's scenes (our policy's: two balls, its cameras and training plane)
-        scene = {"n_objects": 2, **scene_settings(source), **contact}
-        _CACHE[wkey] = make_world(target=cell["target"], speed_m_s=cell["speed_m_s"], **scene)
-    return source, _CACHE[wkey]
-
-
-def _task_stack(cell: dict) -> dict:
-    """A contact task's stack settings (``task_stack_settings``); none for reach."""
-    task = cell.get("task", "reach")
-    if task == "reach":
-        return {}
-    from scenarios.world.tasks.registry import task_stack_settings
-
-    return task_stack_settings(task, bool(cell.get("compliance", False)))
-
-
-def run_cell(cell: dict, duration_s: float) -> dict:
-    """One episode for one grid cell; returns the row (axes + episode metrics)."""
-    from mmact_ctrl.config import StackConfig
-    from mmact_ctrl.controller import HybridController
-    from mmact_ctrl.loop import run_episode
-    from mmact_ctrl.metrics import episode_metrics
-
-    source, world = _source_and_world(cell)
-    if "model" not in _CACHE:
-        from controllers.robot_model import PandaModel
-
-        _CACHE["model"] = PandaModel()
-    sensor = None
-    if cell.get("perception", "oracle") == "camera":  # the ball measured in rendered frames (30 Hz, 50 ms)
-        skey = ("camera", id(world))
-        if skey not in _CACHE:
-            from scenarios.world.camera_sensor import CameraSensor, CameraSensorConfig
-
-            _CACHE[skey] = CameraSensor(world, CameraSensorConfig())
-        sensor = _CACHE[skey]
-    cfg = StackConfig(mode=cell["mode"], replan_hz=cell["replan_hz"], latency_ms=cell["latency_ms"], bins=cell["bins"],
-                      duration_s=duration_s, perception_hz=sensor.config.rate_hz if sensor is not None else 100.0,
-                      receding_k=int(cell.get("s_steps") or 0), **_task_stack(cell))
-    controller = HybridController(cfg, model=_CACHE["model"])
-    log = run_episode(world, source, controller, seed=cell["seed"], sensor=sensor)
-    m = episode_metrics(log)
-    m["jump_recovery_s"] = float(np.median(m["jump_recovery_s"])) if m["jump_recovery_s"] else float("nan")
-    m.pop("instruction", None)
-    for key in ("plan_ms", "d_steps", "mpc_solve_us", "exec_us", "source_timing_ms"):  # per-chunk/tick lists:
-        m.pop(key, None)  # the row keeps their medians
-    m.pop("target_start_pos_m", None)  # a vector; the cell's seed fixes it
-    return {**cell, "duration_s": duration_s, **{k: v for k, v in m.items() if k != "seed"}}
-
-
-def _run_and_store(args: tuple[dict, float, str]) -> dict:
-    cell, duration_s, path = args
-    row = run_cell(cell, duration_s)
-    Path(path).write_text(json.dumps(row))
-    return row
-
-
-# ---- backends ------------------------------------------------------------------------------
-
-
-def run_local(todo: list[tuple[dict, float, str]], workers: int, progress) -> None:
-    import multiprocessing as mp
-
-    if workers <= 1:
-        for item in todo:
-            _run_and_store(item)
-            progress()
-        return
-    with mp.get_context("spawn").Pool(workers) as pool:
-        for _ in pool.imap_unordered(_run_and_store, todo):
-            progress()
-
-
-def run_ray(todo: list[tuple[dict, float, str]], address: str | None, progress) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise SystemExit("--backend ray needs Ray: pip install -e '.[cluster]'") from None
-    ray.init(address=address or "auto", ignore_reinit_error=True, log_to_driver=False)
-    remote = ray.remote(num_cpus=1)(run_cell)
-    refs = {remote.remote(cell, duration_s): path for cell, duration_s, path in todo}
-    pending = list(refs)
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        row = ray.get(done[0])
-        Path(refs[done[0]]).write_text(json.dumps(row))  # results are files on the driver: resumable
-        progress()
-
-
-# ---- report --------------------------------------------------------------------------------
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m scenarios.sweep", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", required=True, help="output directory (cells/, results.csv, report.md, *.png)")
-    p.add_argument("--quick", action="store_true", help="a small grid that finishes in under two minutes")
-    p.add_argument("--seeds", type=int, default=10, help="seeds per cell of the default grid's lead and families studies "
-                                                         "(the replan, rtc_grid, bins and perception studies use up to 3)")
-    p.add_argument("--duration-s", type=float, default=None,
-                   help="episode length (default 6 s; 4 s with --quick on reach)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local", help="process pool here, or a Ray cluster")
-    p.add_argument("--workers", type=int, default=2, help="local backend: parallel processes")
-    p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
-    p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
-                                                  "speed_m_s, bins, seeds[, perception, lead, d_steps, s_steps]}) instead "
-                                                  "of the default grid")
-    p.add_argument("--source", type=source_spec_arg, default="expert", metavar="SOURCE",
-                   help="chunk source of every cell: expert (the scripted expert, default), policy (the learned policy "
-                        "in its training scenes; bins are then its own), module.path:factory or file.py:factory (your "
-                        "own source, README 'Bring your own policy'), or ws://HOST:PORT (a policy server speaking "
-                        "openpi's protocol). Every source but the expert has no lead axis and no bins study")
-    p.add_argument("--source-arg", action="append", default=[], metavar="KEY=VALUE",
-                   help="a keyword setting for a module:factory source (repeatable; VALUE read as JSON when it parses)")
-    p.add_argument("--checkpoint", default=None, help="policy checkpoint (default: the shipped one)")
-    p.add_argument("--preset", metavar="NAME|PATH", default=None,
-                   help="ws:// source: the convention its policy was trained in (libero, droid, mmact, or a JSON preset "
-                        "file: README 'Conventions'); default: what the server declares")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    from scenarios.world.tasks.registry import TASKS
-
-    p.add_argument("--task", choices=TASKS, default="reach",
-                   help="the task of the default grid: reach (the studies above), pick (open_loop vs hybrid on the "
-                        "conveyor: static, linear 0.2 / 0.4 m/s, reversal, jump) or insert (bins x clearance x noise x "
-                        "mode x compliance, static fixture). Default: reach")
-    args = p.parse_args(argv)
-    if args.seeds < 1 or args.workers < 1:
-        p.error(f"--seeds and --workers must be >= 1, got {args.seeds} and {args.workers}")
-    # a contact task needs its 6 s even in a quick run (a peg seats at 3-5 s)
-    duration_s = args.duration_s if args.duration_s is not None else (4.0 if args.quick and args.task == "reach" else 6.0)
-    if not duration_s > 0:
-        p.error(f"--duration-s must be > 0, got {duration_s}")
-    try:
-        if args.grid:
-            text = args.grid.strip()
-            spec = json.loads(text if text.startswith("[") or not Path(text).is_file() else Path(text).read_text())
-            studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
-        else:
-            studies = task_grid(args.task, args.quick, args.seeds)
-        from scenarios.world.targets import KINDS
-
-        for s in studies:
-            bad = [t for t in s.target if t not in KINDS]
-            if bad:
-                raise ValueError(f"study {s.name!r}: unknown target(s) {bad}; expected some of {KINDS}")
-            lats = [d * STEP_S * 1000.0 for d in s.d_steps] if s.d_steps else list(s.latency_ms)
-            if any(lat / 1000.0 >= duration_s for lat in lats):
-                raise ValueError(f"study {s.name!r}: a latency of {max(lats):g} ms is not shorter than the episode")
-        if not isinstance(spec if args.grid else [], list):
-            raise ValueError("--grid must be a JSON list of studies")
-    except (ValueError, TypeError, OSError) as exc:
-        p.error(f"bad grid: {exc}")
-
-    out = Path(args.out)
-    (out / "cells").mkdir(parents=True, exist_ok=True)
-    cells = [c for s in studies for c in s.cells()]
-    try:
-        settings = settings_from_args(args)
-        settings.check()
-        notes: list[str] = []
-        if settings.kind != "expert":  # fail here, in one line, not in every worker
-            probe = build_source(settings)
-            try:  # the modes this source cannot serve are left out, and the report says so
-                for mode in sorted({c["mode"] for c in cells}):
-                    try:
-                        require_capabilities(probe, make_executor(mode).needs, mode)
-                    except SourceError as exc:
-                        notes.append(f"--mode {mode} left out: {exc}")
-                        cells = [c for c in cells if c["mode"] != mode]
-            finally:
-                close_source(probe)
-    except (ValueError, OSError, RuntimeError) as exc:
-        p.error(str(exc).splitlines()[0])
-    if settings.kind != "expert":
-        ckpt = None
-        if settings.kind == "policy":
-            from policy.inference import DEFAULT_CHECKPOINT
-
-            ckpt = args.checkpoint or str(DEFAULT_CHECKPOINT)
-        # a source's own chunks: no expert lead axis (one cell per lead-free condition), no bins study
-        seen, own_cells = set(), []
-        for c in cells:
-            if c["study"] == "bins":
-                continue
-            c = {**c, "source": args.source, "checkpoint": ckpt, "lead": "-",
-                 **({"source_args": settings.args} if settings.args else {}),
-                 **({"preset": settings.preset} if settings.preset else {})}
-            key = cell_key(c, duration_s) + c["study"]
-            if key not in seen:
-                seen.add(key)
-                own_cells.append(c)
-        cells = own_cells
-    else:
-        cells = [{**c, "source": "expert"} for c in cells]
-    todo, rows = [], []
-    for c in cells:
-        path = out / "cells" / f"{cell_key(c, duration_s)}.json"
-        if path.is_file():
-            continue
-        todo.append((c, duration_s, str(path)))
-    from tqdm import tqdm
-
-    t0 = time.perf_counter()
-    bar = tqdm(total=len(cells), initial=len(cells) - len(todo), desc="cells", unit="ep", disable=args.quiet,
-               file=sys.stderr)
-    try:
-        if args.backend == "ray":
-            run_ray(todo, args.ray_address, lambda: bar.update(1))
-        else:
-            run_local(todo, args.workers, lambda: bar.update(1))
-    finally:
-        bar.close()
-    for c in cells:  # rows in grid order, each cell's study label from this grid
-        row = json.loads((out / "cells" / f"{cell_key(c, duration_s)}.json").read_text())
-        rows.append({**row, "study": c["study"]})
-    write_csv(rows, out / "results.csv")
-    from scenarios.sweep.report import write_report
-
-    write_report(rows, out, wall_s=time.perf_counter() - t0, resumed=len(cells) - len(todo), notes=notes)
-    for n in notes:
-        print(n)
-    print(f"{len(rows)} episodes ({len(cells) - len(todo)} resumed) -> {out / 'results.csv'}, {out / 'report.md'}")
-    return 0
-
+__all__ = ["AXES", "FAMILIES", "LEADS", "PERCEPTIONS", "STEP_S", "TASK_AXES", "Study", "cell_key", "default_grid",
+           "main", "run_cell", "run_local", "run_ray", "task_grid", "write_csv"]
 
 if __name__ == "__main__":
     sys.exit(main())
