@@ -170,7 +170,8 @@ def make_served_source(args: argparse.Namespace):
         finally:
             world.close()
         cfg = source.config
-        return source, scene, (f"scripted {args.task} expert (lead {lead}, {cfg.horizon} x {cfg.dt_s:g} s, "
+        what = "scripted expert" if args.task == "reach" else f"scripted {args.task} expert"
+        return source, scene, (f"{what} (lead {lead}, {cfg.horizon} x {cfg.dt_s:g} s, "
                                f"{source.tokenizer.bins if source.tokenizer else 'no'} bins)")
     from mmact_ctrl.sources.loader import load_source, parse_source_args
 

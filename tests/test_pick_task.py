@@ -207,3 +207,19 @@ def test_the_loop_and_the_executors_know_no_task():
                 if pattern.search(line):
                     offenders.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
     assert offenders == [], "\n".join(offenders)
+
+
+def test_the_gymnasium_environment_runs_the_pick_task_and_passes_check_env():
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+
+    import mmact_ctrl  # noqa: F401 - registers the environment
+
+    with gymnasium.make("mmact_ctrl/MovingTarget-v0", task="pick", target="static", mode="hybrid", cameras=(),
+                        duration_s=3.0) as env:
+        check_env(env.unwrapped)
+        _, info = env.reset(seed=11)
+        assert type(env.unwrapped.world).__name__ == "PickWorld"
+        from scenarios.world.gym_env import as_observation
+
+        assert as_observation(info).target_pos_m[2] == pytest.approx(CUBE_REST_Z_M, abs=0.003)  # the cube, not a ball

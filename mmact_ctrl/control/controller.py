@@ -81,7 +81,7 @@ class HybridController:
         self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
                                 in_hand=self._object_in_hand, in_contact=self._in_contact)
         self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
-        self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s)
+        self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m)
         self.floor = FloorClamp(config.tcp_floor_m)
         self.reflex = GraspReflex(config.grasp_reflex)
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.

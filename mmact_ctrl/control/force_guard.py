@@ -28,9 +28,12 @@ MAX_YIELD_M = 0.05
 class ContactForceGuard:
     """See the module. ``offset_m`` is the reference's current yield (world frame, m)."""
 
-    def __init__(self, limit_n: float, dt_s: float) -> None:
+    def __init__(self, limit_n: float, dt_s: float, floor_m: float = -np.inf) -> None:
         self.threshold_n = GUARD_FRACTION * float(limit_n)
         self.dt_s = float(dt_s)
+        #: the yield never takes the reference below the TCP floor (``StackConfig.tcp_floor_m``), m: a force that
+        #: pulls the hand down (a held cube dragged by the belt) must not drive it into the table
+        self.floor_m = float(floor_m)
         self.reset()
 
     def reset(self) -> None:
@@ -57,5 +60,9 @@ class ContactForceGuard:
                 self.offset_m, self.active = np.zeros(3), False
 
     def apply(self, pos_m: np.ndarray) -> np.ndarray:
-        """The reference position with the yield (``pos_m`` itself while the guard is idle)."""
-        return pos_m + self.offset_m if self.active else pos_m
+        """The reference position with the yield, never below the floor (``pos_m`` itself while the guard is idle)."""
+        if not self.active:
+            return pos_m
+        out = pos_m + self.offset_m
+        out[2] = max(out[2], min(self.floor_m, pos_m[2]))
+        return out
