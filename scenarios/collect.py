@@ -40,32 +40,10 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.robot_description import HOME_Q_RAD, JointLimits
-from mmact_ctrl.config import StackConfig
-from mmact_ctrl.controller import HybridController
-from mmact_ctrl.loop import observe
 from policy.action_tokenizer import ActionBounds
-from scenarios.world.expert import LEADS, ExpertConfig, ScriptedExpert, expert_actions, lead_velocity_m_s
-from scenarios.world.panda_scene import TARGET_COLORS
-from scenarios.world.factory import make_world
-
-#: single motions a collection may use, and the mixes.
-MOTIONS: tuple[str, ...] = ("static", "linear", "reversal", "swerve", "random_walk", "jump")
-MOTION_CHOICES: tuple[str, ...] = (*MOTIONS, "mixed", "all")
-
-
-def draw_motion(motion: str, rng: np.random.Generator) -> str:
-    """The motion kind of one episode."""
-    if motion == "mixed":
-        return "linear" if rng.random() < 1 / 3 else "static"
-    if motion == "all":
-        return "static" if rng.random() < 1 / 3 else str(rng.choice(MOTIONS[1:]))
-    return motion
-
-
-def in_box(pos_m: np.ndarray, box_m: tuple[float, ...]) -> bool:
-    """Whether ``pos_m``'s x, y lie in ``box_m = (x0, x1, y0, y1)``."""
-    return bool(box_m) and box_m[0] <= pos_m[0] <= box_m[1] and box_m[2] <= pos_m[1] <= box_m[3]
+from scenarios.collect_episode import (MOTION_CHOICES, MOTIONS, collect_episode, draw_motion, in_box,  # noqa: F401
+                                       question_answer)
+from scenarios.world.expert import LEADS, ExpertConfig
 
 
 @dataclass(frozen=True)
@@ -135,114 +113,6 @@ class CollectConfig:
             raise ValueError("driver_prob > 0 needs a driver_checkpoint (the policy whose chunks drive the arm)")
         if self.driver_checkpoint and not Path(self.driver_checkpoint).is_file():
             raise ValueError(f"driver_checkpoint {self.driver_checkpoint!r} does not exist")
-
-
-def question_answer(rng: np.random.Generator, objects_pos_m: np.ndarray, target_index: int) -> tuple[str, str]:
-    """A question about the scene whose answer a single frame shows."""
-    colors = TARGET_COLORS[: len(objects_pos_m)]
-    i = int(rng.integers(len(colors)))
-    p = objects_pos_m[i]
-    kind = int(rng.integers(3 if len(colors) == 2 else 2))
-    if kind == 0:  # +y is the robot's left
-        side = "left" if p[1] > 0.07 else "right" if p[1] < -0.07 else "center"
-        return f"where is the {colors[i]} ball?", side
-    if kind == 1:
-        return f"is the {colors[i]} ball high or low?", "high" if p[2] > 0.3 else "low"
-    closer = int(np.argmin(np.linalg.norm(objects_pos_m[:, :2], axis=1)))
-    return "which ball is closer to the robot?", colors[closer]
-
-
-def collect_episode(cfg: CollectConfig, index: int, world_cache: dict) -> dict[str, list]:
-    """Run one episode and return its samples as lists."""
-    seed = cfg.seed + index
-    rng = np.random.default_rng([seed, 7])
-    n_objects = cfg.objects or (1 if rng.random() < 1 / 3 else 2)
-    kind = draw_motion(cfg.motion, rng)
-    key = (n_objects, kind)
-    if key not in world_cache:
-        world_cache[key] = make_world(kind, cfg.speed_m_s, n_objects=n_objects, plane_z_m=cfg.plane_z_m,
-                                      image_size_px=cfg.image_size_px, cameras=cfg.cameras)
-    world = world_cache[key]
-    world.reset(seed)
-    attempt = 0
-    while in_box(world.target_pos_m(), cfg.holdout_box_m):  # a held-out region: draw another scene
-        attempt += 1
-        if attempt > 1000:
-            raise RuntimeError(f"holdout_box_m {cfg.holdout_box_m} covers every scene of seed {seed}")
-        world.reset(seed + 10_000_000 * attempt)
-    # random start: perturb the home pose (the world's own reset puts the arm at home)
-    lim = JointLimits().arrays()
-    q0 = np.clip(np.asarray(HOME_Q_RAD) + rng.normal(0.0, cfg.start_noise_rad, 7), lim["q_min_rad"] + 0.1, lim["q_max_rad"] - 0.1)
-    world.set_arm_state(q0)
-    # The arm only has to move like a policy-driven arm: the QP tracking the expert's chunks (replanned at
-    # every sample, no latency) does that at a fraction of the hybrid stack's cost.
-    if "controller" not in world_cache:
-        stack = StackConfig(mode="open_loop", use_mpc=False, duration_s=cfg.duration_s + cfg.future_dt_s, latency_ms=0.0)
-        world_cache["controller"] = HybridController(stack)
-    controller = world_cache["controller"]
-    controller.reset(world.state().q_rad)
-    box = dict(workspace_low_m=tuple(world.target.workspace_low_m), workspace_high_m=tuple(world.target.workspace_high_m))
-    expert_cfg = ExpertConfig(lead=cfg.expert_lead, **box)
-    source = ScriptedExpert(expert_cfg)
-    driver = None
-    if cfg.driver_prob > 0:
-        if "driver" not in world_cache:
-            from mmact_ctrl.policy_source import PolicyChunkSource
-
-            world_cache["driver"] = PolicyChunkSource(cfg.driver_checkpoint)
-        driver = world_cache["driver"]
-    dt = world.dt_s
-    n = int(round((cfg.duration_s + cfg.future_dt_s) / dt))
-    every = int(round(cfg.sample_every_s / dt))
-    future = int(round(cfg.future_dt_s / dt))
-    gap = int(round(cfg.frame_gap_s / dt))
-    frames: dict[int, np.ndarray] = {}
-    target_at: dict[int, np.ndarray] = {}  # the instructed ball where an earlier frame was taken
-    samples: dict[str, list] = {k: [] for k in ("images", "future_images", "q_rad", "actions", "instructions",
-                                                "questions", "answers", "target_index", "target_pos_m",
-                                                "target_prev_pos_m")}
-    pending = []
-    for k in range(n + 1):
-        t = k * dt
-        if gap and (k + gap) % every == 0 and (k + gap) * dt < cfg.duration_s - 1e-9:  # an earlier frame
-            frames[k], target_at[k] = world.render(), world.target_pos_m().copy()
-        if k % every == 0 and k * dt < cfg.duration_s - 1e-9:
-            early = gap and k >= gap
-            obs = observe(world, controller, t, with_image=True,
-                          target_prev_pos_m=target_at[k - gap] if early else None, frame_gap_s=gap * dt if early else 0.0,
-                          prev_image=frames[k - gap] if early else None)
-            frames[k] = obs.image
-            q, a = question_answer(rng, world.objects_pos_m(), world.target_index)
-            pending.append((k, obs, q, a))
-            drive = driver if driver is not None and rng.random() < cfg.driver_prob else source
-            controller.activate(drive.plan(obs), t, controller.target_estimate(t))
-        if any(kk + future == k for kk, *_ in pending) and k not in frames:
-            frames[k] = world.render()
-        if k == n:
-            break
-        if k % 10 == 0:
-            controller.perceive(t, world.measure_target())
-        state = world.state()
-        out = controller.tick(t, state.q_rad, state.dq_rad_s)
-        world.step(out.tau_nm, out.gripper_m)
-    for k, obs, q, a in pending:
-        if gap:  # [current views, earlier views]; the first sample has no earlier frame: it repeats the current one
-            samples["images"].append(np.concatenate([frames[k], frames[k - gap] if k >= gap else frames[k]]))
-        else:
-            samples["images"].append(frames[k])
-        samples["future_images"].append(frames[k + future])
-        samples["q_rad"].append(obs.q_rad.astype(np.float32))
-        vel = lead_velocity_m_s(expert_cfg, obs)
-        samples["actions"].append(expert_actions(expert_cfg, obs.ee_pos_m, obs.target_pos_m, vel).astype(np.float32))
-        samples["instructions"].append(obs.instruction)
-        samples["questions"].append(q)
-        samples["answers"].append(a)
-        samples["target_index"].append(world.target_index)
-        samples["target_pos_m"].append(obs.target_pos_m.astype(np.float32))
-        # where the ball was in the earlier frame (the first sample repeats the current frame: its position)
-        prev = obs.target_prev_pos_m if obs.target_prev_pos_m is not None else obs.target_pos_m
-        samples["target_prev_pos_m"].append(np.asarray(prev).astype(np.float32))
-    return samples
 
 
 def _worker(args: tuple[CollectConfig, list[int]]) -> dict[str, list]:
