@@ -194,8 +194,9 @@ class EpisodeRunner(SourceQueries):
         """The first part of tick ``k``: measurements, and the query when one is due; True when it pauses there."""
         k, log, t = self.k, self.log, self.k * self.dt_s
         self._state = self.world.state()
-        self.contact.check(self._state.wrench_ext)
-        self.controller.sense_wrench(self._state.wrench_ext)
+        if self._state.wrench_ext is not None:  # a contact task's world measures the wrench (reach's does not)
+            self.contact.check(self._state.wrench_ext)
+            self.controller.sense_wrench(self._state.wrench_ext)
         s0 = time.perf_counter()
         try:
             arrived = self.sensor.poll(t)

@@ -22,13 +22,13 @@ class ChunkStage:
         stop_limits: ``(a_max m/s^2, j_max m/s^3, dw_max rad/s^2, ddw_max rad/s^3)`` of the watchdog's stop.
     """
 
-    def __init__(self, executor, stop_limits: tuple[float, float, float, float], in_hand=lambda: False,
-                 in_contact=lambda: False) -> None:
+    def __init__(self, executor, stop_limits: tuple[float, float, float, float], in_hand=lambda: False) -> None:
         self.executor = executor
         #: whether the object is between the fingers now (asked only while the chunk closes the gripper)
         self.in_hand = in_hand
-        #: whether the robot touches the world now (the measured external force over a threshold)
-        self.in_contact = in_contact
+        #: whether the robot touches the world now (the measured external force over a threshold; set by the
+        #: controller each tick from the measured wrench, False where none is measured)
+        self.touching = False
         self.stop_limits = stop_limits
         self.active: ChunkReference | None = None
         self.stop: StopTrajectory | None = None  # the watchdog's braking reference while no valid chunk covers now
@@ -43,6 +43,7 @@ class ChunkStage:
         self.hold_pos_m, self.hold_rotvec_rad, self.hold_gripper_m = pos_m, rotvec_rad, float(gripper_m)
         self.active, self.stop, self.watchdog_stops = None, None, 0
         self._latch = None
+        self.touching = False
 
     def activate(self, ref: ChunkReference, t_s: float) -> None:
         """``ref`` becomes the executed chunk at ``t_s``; a watchdog stop ends."""
@@ -73,7 +74,7 @@ class ChunkStage:
         if self.active is None:
             return ReferenceSample(self.hold_pos_m, np.zeros(3), self.hold_rotvec_rad, np.zeros(3), self.hold_gripper_m)
         action, rate = self.executor.sample(t_s, self.active)
-        if (action[6] < GRIPPER_CLOSING_BELOW_M and self.in_hand()) or self.in_contact():  # latched (_latched)
+        if self.touching or (action[6] < GRIPPER_CLOSING_BELOW_M and self.in_hand()):  # latched (_latched)
             return ReferenceSample(action[:3] + self._latched(t_s), rate[:3], action[3:6], rate[3:6], float(action[6]))
         self._latch = None
         offset, offset_vel = self.executor.offset(t_s, self.active)

@@ -79,7 +79,7 @@ class HybridController:
         self.filter = TargetEstimator(replace(config.filter, dt_s=1.0 / config.perception_hz))
         sc = config.smoother
         self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
-                                in_hand=self._object_in_hand, in_contact=self._in_contact)
+                                in_hand=self._object_in_hand)
         self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
         self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m)
         self.floor = FloorClamp(config.tcp_floor_m)
@@ -194,6 +194,7 @@ class HybridController:
         rotvec = rotvec_from_rot(rot, self.rot_nominal)
         self._gripper_m = float(gripper_m)
         self._force_n = 0.0
+        self.chunk.touching = False
         self.force_guard.reset()
         self.chunk.reset(pos, rotvec, gripper_m)
         self.floor.clamps = 0
@@ -306,7 +307,8 @@ class HybridController:
         else:
             s = self.smoothed_reference(t_s)
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
-        pos = self.force_guard.apply(pos)
+        if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
+            pos = self.force_guard.apply(pos)
         tau = self.qp.solve(terms, q_rad, dq_rad_s,
                             TaskReference(pos, vel, acc, s.rot, s.ang_vel_rad_s, s.ang_acc_rad_s2, q_post))
         gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
@@ -314,15 +316,14 @@ class HybridController:
         return TickOutput(tau_nm=tau, gripper_m=gripper_m, ref_pos_m=s.pos_m, ee_pos_m=terms.pos_m,
                           ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])
 
-    def sense_wrench(self, wrench: np.ndarray | None) -> None:
-        """The robot's measured external wrench at the TCP this tick (``RobotState.wrench_ext``; None where the world
-        measures none, as in reach)."""
-        self._force_n = 0.0 if wrench is None else float(np.linalg.norm(np.asarray(wrench)[:3]))
-        self.force_guard.update(None if wrench is None else np.asarray(wrench)[:3])
-
-    def _in_contact(self) -> bool:
-        """Whether the robot touches the world: the measured external force over ``CONTACT_LATCH_N``."""
-        return self._force_n > CONTACT_LATCH_N
+    def sense_wrench(self, wrench: np.ndarray) -> None:
+        """The robot's measured external wrench at the TCP this tick (``RobotState.wrench_ext``; the runner calls it
+        only where the world measures one: in reach nothing of this runs). Contact (the force over
+        ``CONTACT_LATCH_N``) latches the chunk's correction; the guard sees the force."""
+        force = np.asarray(wrench, dtype=float)[:3]
+        self._force_n = float(np.linalg.norm(force))
+        self.chunk.touching = self._force_n > CONTACT_LATCH_N
+        self.force_guard.update(force)
 
     def _object_in_hand(self) -> bool:
         """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``)."""

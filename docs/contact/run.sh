@@ -1,0 +1,20 @@
+#!/bin/bash
+# Issue 32's figures (2026-12-04, the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
+# expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
+set -e
+mt() { python -m scenarios.moving_target --source expert --episodes 50 --seed 1000 --duration-s 6 "$@"; }
+mt --task pick --target static --speed 0 --mode open_loop hybrid --json out/pick_static.json > pick_static.txt
+mt --task pick --target linear --speed 0.2 --mode open_loop hybrid --json out/pick_linear_0.2.json > pick_linear_0.2.txt
+mt --task pick --target linear --speed 0.4 --mode open_loop hybrid --json out/pick_linear_0.4.json > pick_linear_0.4.txt
+mt --task pick --target reversal --speed 0.2 --mode open_loop hybrid --json out/pick_reversal_0.2.json > pick_reversal_0.2.txt
+mt --task pick --target jump --speed 0.2 --mode open_loop hybrid --json out/pick_jump_0.2.json > pick_jump_0.2.txt
+mt --task insert --target static --speed 0 --clearance-mm 1.0 --mode open_loop hybrid --json out/insert_1mm.json > insert_static_1mm.txt
+mt --task insert --target static --speed 0 --clearance-mm 1.0 --compliance --mode hybrid open_loop --json out/insert_1mm_c.json > insert_static_1mm_compliance.txt
+# the bins x clearance x noise x mode x compliance table (2 seeds a cell: see README)
+python -m scenarios.sweep --grid insert_table_grid.json --out out/insert_table --workers 2
+# the simulator's floor, and the real-time factor of each task in one run
+python -m scenarios.insert_floor --offset-mm 0.5 --tilt-deg 0.5 > insert_floor.txt
+python -m scenarios.bench_tasks --episodes 5 > bench_tasks.txt
+# the fault suite on each task
+python -m scenarios.faults --quick --task pick --out out/faults_pick
+python -m scenarios.faults --quick --task insert --out out/faults_insert
