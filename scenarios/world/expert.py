@@ -26,6 +26,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
+from policy.vocab import VocabLayout
 from scenarios.world.targets import reflect_into_box
 
 GRIPPER_OPEN_M = 0.08
@@ -82,13 +83,28 @@ def min_jerk(s: np.ndarray) -> np.ndarray:
 def lead_velocity_m_s(config: ExpertConfig, observation: Observation) -> np.ndarray:
     """The target velocity (3,) m/s the expert leads with: zero for ``lead="none"``, without an earlier frame, or
     when the two frames imply a speed above ``max_lead_speed_m_s`` (a jump)."""
+    return two_frame_velocity_m_s(observation, config.lead, config.max_lead_speed_m_s)
+
+
+def two_frame_velocity_m_s(observation: Observation, lead: str, max_speed_m_s: float,
+                           horizontal: bool = False) -> np.ndarray:
+    """The target's velocity (3,) m/s from the observation's two frames (``horizontal``: its z zeroed, for objects
+    that move in the table's plane); zero for ``lead="none"``, without an earlier frame, or above ``max_speed_m_s``
+    (a jump, not a motion). Every expert leads with it."""
     prev, gap = observation.target_prev_pos_m, float(observation.frame_gap_s)
-    if config.lead == "none" or prev is None or not gap > 0:
+    if lead == "none" or prev is None or not gap > 0:
         return np.zeros(3)
     vel = (np.asarray(observation.target_pos_m, dtype=np.float64) - np.asarray(prev, dtype=np.float64)) / gap
-    if not np.all(np.isfinite(vel)) or float(np.linalg.norm(vel)) > config.max_lead_speed_m_s:
+    if horizontal:
+        vel[2] = 0.0
+    if not np.all(np.isfinite(vel)) or float(np.linalg.norm(vel)) > max_speed_m_s:
         return np.zeros(3)
     return vel
+
+
+def expert_tokenizer(bins: int) -> ActionTokenizer | None:
+    """The shared action tokenizer every expert's chunks go through (``bins`` 0: not quantized)."""
+    return ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
 
 
 def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.ndarray,
@@ -116,13 +132,14 @@ def expert_actions(config: ExpertConfig, ee_pos_m: np.ndarray, target_pos_m: np.
     return actions
 
 
-class ScriptedExpert:
-    """``ChunkSource`` that aims at the target it sees in one frame, or (``lead="velocity"``) where two frames say
-    it will be."""
+class ExpertBase:
+    """What every scripted expert (reach's, and each task's in ``scenarios.world.tasks``) shares as a
+    ``ChunkSource``: a frozen config with ``dt_s``, an optional tokenizer its float chunks are quantized through, and
+    the chunk built from them (:meth:`_finish`)."""
 
     needs_image = False
 
-    def __init__(self, config: ExpertConfig = ExpertConfig(), tokenizer: ActionTokenizer | None = None) -> None:
+    def __init__(self, config, tokenizer: ActionTokenizer | None = None) -> None:
         self.config = config
         self.tokenizer = tokenizer
 
@@ -135,6 +152,23 @@ class ScriptedExpert:
         """Half-open range of the action tokens its chunks carry (None: not quantized)."""
         tok = self.tokenizer
         return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
+
+    def _finish(self, actions: np.ndarray, observation: Observation) -> ActionChunk:
+        """The chunk of the float ``actions`` (H, 7), quantized through the tokenizer when there is one."""
+        if self.tokenizer is None:
+            return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=observation.t0_s)
+        waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)
+        return ActionChunk(
+            waypoints=waypoints, dt_s=self.config.dt_s, t0_s=observation.t0_s, tokens=tokens, n_clipped=n_clipped
+        )
+
+
+class ScriptedExpert(ExpertBase):
+    """``ChunkSource`` that aims at the target it sees in one frame, or (``lead="velocity"``) where two frames say
+    it will be."""
+
+    def __init__(self, config: ExpertConfig = ExpertConfig(), tokenizer: ActionTokenizer | None = None) -> None:
+        super().__init__(config, tokenizer)
 
     def plan(self, observation: Observation) -> ActionChunk:
         actions = expert_actions(self.config, observation.ee_pos_m, observation.target_pos_m,
@@ -153,11 +187,3 @@ class ScriptedExpert:
         rest = expert_actions(self.config, known[n - 1, :3], observation.target_pos_m + n * self.config.dt_s * vel,
                               vel)[: self.config.horizon - n]
         return self._finish(np.vstack([known[:n], rest]), observation)
-
-    def _finish(self, actions: np.ndarray, observation: Observation) -> ActionChunk:
-        if self.tokenizer is None:
-            return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=observation.t0_s)
-        waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)
-        return ActionChunk(
-            waypoints=waypoints, dt_s=self.config.dt_s, t0_s=observation.t0_s, tokens=tokens, n_clipped=n_clipped
-        )

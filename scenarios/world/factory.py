@@ -6,9 +6,7 @@ The CLI, the sweep, the data collector and tools that must not import ``scenario
 
 from __future__ import annotations
 
-from policy.action_tokenizer import ActionTokenizer
-from policy.vocab import VocabLayout
-from scenarios.world.expert import ExpertConfig, ScriptedExpert
+from scenarios.world.expert import ExpertConfig, ScriptedExpert, expert_tokenizer
 from scenarios.world.panda_scene import SceneConfig
 from scenarios.world.sim_world import SimWorld
 from scenarios.world.tasks.registry import task_by_name
@@ -60,7 +58,7 @@ def make_reach_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, le
     """The scripted expert, its chunks quantized through the shared action tokenizer (bins=0: not quantized);
     ``lead``: ``"none"`` aims where the target is, ``"velocity"`` where two frames say it will be (reflected at the
     walls of ``world``'s target workspace when a world is given)."""
-    tokenizer = ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
+    tokenizer = expert_tokenizer(bins)
     box = {}
     if world is not None:
         box = dict(workspace_low_m=tuple(world.target.workspace_low_m), workspace_high_m=tuple(world.target.workspace_high_m))

@@ -136,12 +136,7 @@ class SimWorld:
         self._motions = motions
         # static objects are placed once here; step() moves only the others
         self._moving = [(i, mo) for i, mo in zip(self._mocap, motions) if not isinstance(mo, StaticMotion)]
-        if target_index is None and self.fixed_target_index is not None:
-            target_index = self.fixed_target_index
-        self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
-        template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
-        self.instruction = self.fixed_instruction or template.format(color=TARGET_COLORS[self.target_index])
-        self._meas_rng = np.random.default_rng([int(seed), 1])
+        self._draw_instruction(rng, seed, target_index, INSTRUCTION_TEMPLATES)
 
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
@@ -198,8 +193,20 @@ class SimWorld:
         self._place_objects(d.time, self._moving)
         self._kinematics_stale = True
 
+    def _draw_instruction(self, rng: np.random.Generator, seed: int, target_index: int | None,
+                          templates: tuple[str, ...]) -> None:
+        """The instructed object (drawn from ``rng`` unless given or fixed), then the instruction's template (from
+        ``rng``, in this order), named by the object's colour; the measurement noise's stream of ``seed``."""
+        if target_index is None and self.fixed_target_index is not None:
+            target_index = self.fixed_target_index
+        self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
+        template = templates[int(rng.integers(len(templates)))]
+        self.instruction = self.fixed_instruction or template.format(color=TARGET_COLORS[self.target_index])
+        self._meas_rng = np.random.default_rng([int(seed), 1])
+
     def state(self) -> RobotState:
-        """Current time, arm joints, gripper opening (sum of both fingers) and TCP position."""
+        """Current time, arm joints, gripper opening (sum of both fingers), TCP position and the measured external
+        wrench (:meth:`measured_wrench`)."""
         self._require_reset()
         self._refresh_kinematics()
         d = self.data
@@ -209,7 +216,13 @@ class SimWorld:
             dq_rad_s=d.qvel[self._arm_v_slice].copy(),
             gripper_m=float(d.qpos[self._finger_qpos].sum()),
             ee_pos_m=d.site_xpos[self._tcp].copy(),
+            wrench_ext=self.measured_wrench(),
         )
+
+    def measured_wrench(self) -> np.ndarray | None:
+        """The external wrench on the robot at the TCP (6,), or None: reach's balls touch nothing (a contact task's
+        world measures it: ``scenarios.world.tasks.contact_world``)."""
+        return None
 
     def target_pos_m(self) -> np.ndarray:
         """Ground-truth position (3,) of the instructed object now, m."""

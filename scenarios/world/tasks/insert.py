@@ -14,10 +14,8 @@ import mujoco
 import numpy as np
 
 from scenarios.world.panda_scene import SceneConfig
-from scenarios.world.sim_world import SimWorld
 from scenarios.world.targets import JumpMotion, TargetSpec, make_motion, plane_workspace
-from scenarios.world.tasks.contact import external_wrench, robot_geom_mask
-from scenarios.world.tasks.grip import slew
+from scenarios.world.tasks.contact_world import ContactWorld
 from scenarios.world.tasks.insert_progress import InsertProgress
 from scenarios.world.tasks.insert_scene import (FIXTURE_BODY, FIXTURE_START_M, HOLE_DEPTH_M, PEG_BELOW_TCP_M, PEG_BODY,
                                                 PEG_LENGTH_M, PEG_SIDE_M, add_insert_scene, hole_half_m)
@@ -43,7 +41,7 @@ def insert_target_spec(kind: str, speed_m_s: float) -> TargetSpec:
                       jump_dist_m=min(base.jump_dist_m, 0.1))
 
 
-class InsertWorld(SimWorld):
+class InsertWorld(ContactWorld):
     """The insert scene behind ``mmact_ctrl.world.World`` (see the module)."""
 
     def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0,
@@ -56,12 +54,9 @@ class InsertWorld(SimWorld):
         self._peg_q = int(m.jnt_qposadr[m.body_jntadr[peg]])
         self._peg_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{PEG_BODY}_geom")
         self._fixture_geom = np.asarray(m.geom_bodyid == fixture)
-        robot = {b for b in range(m.nbody) if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or "").startswith("panda_")}
-        self._robot_geom = robot_geom_mask(m, robot)
         self.hole_half_m = hole_half_m(scene.clearance_mm)
         self.progress = InsertProgress(SEAT_M, self.hole_half_m, m.opt.timestep)
         self._motion = None
-        self._gripper_cmd_m = 0.0
         self.n_objects = 1
 
     # ---- the episode --------------------------------------------------------------------------------------------
@@ -72,10 +67,7 @@ class InsertWorld(SimWorld):
         rng = np.random.default_rng([int(seed), 0])
         self._motion = make_motion(self.target, int(seed))
         self._motions = [self._motion]
-        self.target_index = 0
-        template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
-        self.instruction = self.fixed_instruction or template
-        self._meas_rng = np.random.default_rng([int(seed), 1])
+        self._draw_instruction(rng, seed, 0, INSTRUCTION_TEMPLATES)  # one object: instructed, nothing drawn for it
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         d.qpos[self._arm_qpos] = HOME_Q_RAD
@@ -93,18 +85,14 @@ class InsertWorld(SimWorld):
         return self.state()
 
     def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
-        self._gripper_cmd_m = slew(self._gripper_cmd_m, gripper_m, self.dt_s)
-        super().step(tau_nm, self._gripper_cmd_m)
+        super().step(tau_nm, gripper_m)
         d = self.data
         d.mocap_pos[self._fixture_mocap] = self._motion.pos_m(float(d.time))
         mujoco.mj_kinematics(self.model, d)
         self._kinematics_stale = False
         bottom = self.peg_bottom_m()
         self.progress.update(float(d.time), bottom, bottom - d.site_xpos[self._tcp], self.target_pos_m(),
-                             self._peg_touches_fixture(), float(np.linalg.norm(self._wrench()[:3])))
-
-    def _place_objects(self, t_s: float, placements) -> None:
-        """Nothing: the fixture is moved in ``step`` (the base class moves reach's balls)."""
+                             self._peg_touches_fixture(), float(np.linalg.norm(self.measured_wrench()[:3])))
 
     def peg_bottom_m(self) -> np.ndarray:
         """The centre of the peg's bottom face, m (world)."""
@@ -121,14 +109,6 @@ class InsertWorld(SimWorld):
                     (c.geom2 == self._peg_geom and self._fixture_geom[c.geom1]):
                 return True
         return False
-
-    def _wrench(self) -> np.ndarray:
-        return external_wrench(self.model, self.data, self._robot_geom, self.data.site_xpos[self._tcp])
-
-    def state(self):
-        s = super().state()
-        return type(s)(t_s=s.t_s, q_rad=s.q_rad, dq_rad_s=s.dq_rad_s, gripper_m=s.gripper_m, ee_pos_m=s.ee_pos_m,
-                       wrench_ext=self._wrench())
 
     def target_pos_m(self) -> np.ndarray:
         """The centre of the hole's mouth now, m."""

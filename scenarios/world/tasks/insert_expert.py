@@ -15,8 +15,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
-from policy.vocab import VocabLayout
-from scenarios.world.expert import LEADS, min_jerk
+from scenarios.world.expert import LEADS, ExpertBase, expert_tokenizer, min_jerk, two_frame_velocity_m_s
 from scenarios.world.tasks.insert_scene import HOLE_DEPTH_M, PEG_BELOW_TCP_M
 
 #: the approach ends with the peg's bottom this far over the mouth, m
@@ -48,22 +47,11 @@ class InsertExpertConfig:
             raise ValueError(f"InsertExpertConfig: horizon >= 1 and dt_s > 0, got {self.horizon}, {self.dt_s}")
 
 
-class InsertExpert:
+class InsertExpert(ExpertBase):
     """``ChunkSource`` of the insert task (see the module)."""
 
-    needs_image = False
-
-    def __init__(self, config: InsertExpertConfig = InsertExpertConfig(), tokenizer: ActionTokenizer | None = None):
-        self.config, self.tokenizer = config, tokenizer
-
-    @property
-    def chunk_dt_s(self) -> float:
-        return self.config.dt_s
-
-    @property
-    def action_token_range(self) -> tuple[int, int] | None:
-        tok = self.tokenizer
-        return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
+    def __init__(self, config: InsertExpertConfig = InsertExpertConfig(), tokenizer: ActionTokenizer | None = None) -> None:
+        super().__init__(config, tokenizer)
 
     def plan(self, obs: Observation) -> ActionChunk:
         cfg = self.config
@@ -82,12 +70,8 @@ class InsertExpert:
         return self._finish(a, obs)
 
     def _velocity(self, obs: Observation) -> np.ndarray:
-        prev, gap = obs.target_prev_pos_m, float(obs.frame_gap_s)
-        if self.config.lead == "none" or prev is None or not gap > 0:
-            return np.zeros(3)
-        v = (np.asarray(obs.target_pos_m, dtype=float) - np.asarray(prev, dtype=float)) / gap
-        v[2] = 0.0
-        return v if np.all(np.isfinite(v)) and np.linalg.norm(v) <= MAX_LEAD_SPEED_M_S else np.zeros(3)
+        """The mouth's horizontal velocity from two frames (``two_frame_velocity_m_s``)."""
+        return two_frame_velocity_m_s(obs, self.config.lead, MAX_LEAD_SPEED_M_S, horizontal=True)
 
     def _approach(self, tcp: np.ndarray, over: np.ndarray, times: np.ndarray) -> np.ndarray:
         """A minimum-jerk move to the spot over the mouth, then along the mouth's course there."""
@@ -106,14 +90,8 @@ class InsertExpert:
         pos[:, 2] = np.maximum(tcp[2] - INSERT_SPEED_M_S * times, bottom_z)
         return pos
 
-    def _finish(self, actions: np.ndarray, obs: Observation) -> ActionChunk:
-        if self.tokenizer is None:
-            return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=obs.t0_s)
-        waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)
-        return ActionChunk(waypoints=waypoints, dt_s=self.config.dt_s, t0_s=obs.t0_s, tokens=tokens, n_clipped=n_clipped)
-
 
 def make_insert_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, lead: str = "velocity") -> InsertExpert:
     """The insert expert, its chunks quantized through the shared action tokenizer (bins 0: not quantized)."""
-    tokenizer = ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
+    tokenizer = expert_tokenizer(bins)
     return InsertExpert(InsertExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead), tokenizer)

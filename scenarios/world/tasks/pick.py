@@ -13,11 +13,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from scenarios.world.panda_scene import GRIPPER_MAX_M, TARGET_COLORS, SceneConfig
-from scenarios.world.sim_world import SimWorld
+from scenarios.world.panda_scene import GRIPPER_MAX_M, SceneConfig
 from scenarios.world.targets import JumpMotion, TargetSpec, make_motion, plane_workspace
-from scenarios.world.tasks.contact import external_wrench, robot_geom_mask
-from scenarios.world.tasks.grip import slew
+from scenarios.world.tasks.contact_world import ContactWorld
 from scenarios.world.tasks.pick_scene import (BELT_GEOM, CUBE_BODIES, CUBE_HALF_M, CUBE_REST_Z_M, add_pick_scene)
 from scenarios.world.tasks.progress import PickProgress
 
@@ -31,8 +29,6 @@ INSTRUCTION_TEMPLATES: tuple[str, ...] = (
     "grasp the {color} cube and lift it",
     "lift the {color} block",
 )
-#: the robot's bodies (their contacts make the external wrench)
-ROBOT_BODY_PREFIX = "panda_"
 
 
 def pick_target_spec(kind: str, speed_m_s: float) -> TargetSpec:
@@ -44,7 +40,7 @@ def pick_target_spec(kind: str, speed_m_s: float) -> TargetSpec:
                       jump_dist_m=min(base.jump_dist_m, 0.15))
 
 
-class PickWorld(SimWorld):
+class PickWorld(ContactWorld):
     """The pick scene behind ``mmact_ctrl.world.World`` (see the module)."""
 
     def __init__(self, scene: SceneConfig, target: TargetSpec, noise_m: float = 0.002, dropout: float = 0.0,
@@ -56,8 +52,6 @@ class PickWorld(SimWorld):
         self._cube_v = [int(m.jnt_dofadr[m.body_jntadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)]])
                         for b in CUBE_BODIES[: scene.n_objects]]
         self._belt = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, BELT_GEOM)
-        robot = {b for b in range(m.nbody) if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b).startswith(ROBOT_BODY_PREFIX)}
-        self._robot_geom = robot_geom_mask(m, robot)
         self._motion = None
         self._gripper_cmd_m = GRIPPER_MAX_M
         self._jumps: list[tuple[float, np.ndarray]] = []
@@ -71,12 +65,7 @@ class PickWorld(SimWorld):
         motion = make_motion(self.target, int(seed))
         self._motion = motion
         self._motions = [motion] * self.n_objects  # both ride the one carrier
-        if target_index is None and self.fixed_target_index is not None:
-            target_index = self.fixed_target_index
-        self.target_index = int(rng.integers(self.n_objects)) if target_index is None else int(target_index)
-        template = INSTRUCTION_TEMPLATES[int(rng.integers(len(INSTRUCTION_TEMPLATES)))]
-        self.instruction = self.fixed_instruction or template.format(color=TARGET_COLORS[self.target_index])
-        self._meas_rng = np.random.default_rng([int(seed), 1])
+        self._draw_instruction(rng, seed, target_index, INSTRUCTION_TEMPLATES)
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         d.qpos[self._arm_qpos] = self._home_q()
@@ -125,9 +114,7 @@ class PickWorld(SimWorld):
 
     # ---- the World protocol ---------------------------------------------------------------------------------
     def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
-        # the Franka Hand moves its fingers at most GRIPPER_SPEED_M_S (the opening's rate): the command is slewed
-        self._gripper_cmd_m = slew(self._gripper_cmd_m, gripper_m, self.dt_s)
-        super().step(tau_nm, self._gripper_cmd_m)
+        super().step(tau_nm, gripper_m)
         d = self.data
         t = float(d.time)
         if self._jumps and t >= self._jumps[0][0]:
@@ -137,23 +124,10 @@ class PickWorld(SimWorld):
                 d.qpos[adr:adr + 2] += delta[:2]
         self._set_belt(t)
         self.progress.update(t, self._cube_z(), gripper_m, float(np.linalg.norm(self.model.geom_surfacevel[self._belt, :2])),
-                             self._last_force_n())
-
-    def _place_objects(self, t_s: float, placements) -> None:
-        """Nothing to place: the cubes are physical (the base class moves mocap balls)."""
+                             float(np.linalg.norm(self.measured_wrench()[:3])))
 
     def _cube_z(self) -> np.ndarray:
         return np.array([self.data.qpos[a + 2] for a in self._cube_q])
-
-    def _last_force_n(self) -> float:
-        w = external_wrench(self.model, self.data, self._robot_geom, self.data.site_xpos[self._tcp])
-        return float(np.linalg.norm(w[:3]))
-
-    def state(self):
-        s = super().state()
-        w = external_wrench(self.model, self.data, self._robot_geom, s.ee_pos_m)
-        return type(s)(t_s=s.t_s, q_rad=s.q_rad, dq_rad_s=s.dq_rad_s, gripper_m=s.gripper_m, ee_pos_m=s.ee_pos_m,
-                       wrench_ext=w)
 
     def target_pos_m(self) -> np.ndarray:
         """The instructed cube's centre now, m."""

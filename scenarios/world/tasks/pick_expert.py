@@ -23,8 +23,8 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
-from policy.vocab import VocabLayout
-from scenarios.world.expert import LEADS, GRIPPER_OPEN_M, min_jerk
+from scenarios.world.expert import (GRIPPER_OPEN_M, LEADS, ExpertBase, expert_tokenizer, min_jerk,
+                                    two_frame_velocity_m_s)
 from scenarios.world.tasks.pick_scene import CUBE_HALF_M, CUBE_REST_Z_M
 
 #: the approach passes this far above the cube before the descent, m
@@ -66,30 +66,14 @@ class PickExpertConfig:
 
 def cube_velocity_m_s(config: PickExpertConfig, obs: Observation) -> np.ndarray:
     """The cube's horizontal velocity from two frames (zero without the lead, an earlier frame, or at a jump)."""
-    prev, gap = obs.target_prev_pos_m, float(obs.frame_gap_s)
-    if config.lead == "none" or prev is None or not gap > 0:
-        return np.zeros(3)
-    v = (np.asarray(obs.target_pos_m, dtype=float) - np.asarray(prev, dtype=float)) / gap
-    v[2] = 0.0
-    return v if np.all(np.isfinite(v)) and np.linalg.norm(v) <= MAX_LEAD_SPEED_M_S else np.zeros(3)
+    return two_frame_velocity_m_s(obs, config.lead, MAX_LEAD_SPEED_M_S, horizontal=True)
 
 
-class PickExpert:
+class PickExpert(ExpertBase):
     """``ChunkSource`` of the pick task (see the module)."""
 
-    needs_image = False
-
     def __init__(self, config: PickExpertConfig = PickExpertConfig(), tokenizer: ActionTokenizer | None = None) -> None:
-        self.config, self.tokenizer = config, tokenizer
-
-    @property
-    def chunk_dt_s(self) -> float:
-        return self.config.dt_s
-
-    @property
-    def action_token_range(self) -> tuple[int, int] | None:
-        tok = self.tokenizer
-        return None if tok is None else (int(tok.token_offset), int(tok.token_offset) + int(tok.bins))
+        super().__init__(config, tokenizer)
 
     def plan(self, obs: Observation) -> ActionChunk:
         cfg = self.config
@@ -160,15 +144,9 @@ class PickExpert:
         a[:, 6] = np.where(times < t_close, GRIPPER_OPEN_M, 0.0)
         return a
 
-    def _finish(self, actions: np.ndarray, obs: Observation) -> ActionChunk:
-        if self.tokenizer is None:
-            return ActionChunk(waypoints=actions, dt_s=self.config.dt_s, t0_s=obs.t0_s)
-        waypoints, tokens, n_clipped = self.tokenizer.roundtrip(actions)
-        return ActionChunk(waypoints=waypoints, dt_s=self.config.dt_s, t0_s=obs.t0_s, tokens=tokens, n_clipped=n_clipped)
-
 
 def make_pick_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, lead: str = "velocity",
                      world=None) -> PickExpert:
     """The pick expert, its chunks quantized through the shared action tokenizer (bins 0: not quantized)."""
-    tokenizer = ActionTokenizer(bins=bins, token_offset=VocabLayout(action_bins=bins).action_offset) if bins else None
+    tokenizer = expert_tokenizer(bins)
     return PickExpert(PickExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead), tokenizer)
