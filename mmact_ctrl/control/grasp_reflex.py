@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from mmact_ctrl.control.chunk_stage import GRIPPER_CLOSING_BELOW_M, GRIPPER_OPEN_M
+
 #: the object is between the fingers when its estimate is within these of the TCP: across the fingers' faces
 #: (horizontal) and along them (vertical), m; a 4.5 cm cube in the 8 cm opening has 1.75 cm to spare a side
 BETWEEN_XY_M, BETWEEN_Z_M = 0.012, 0.015
-#: a gripper command below this closes the gripper, m
-CLOSING_BELOW_M = 0.04
-CLOSED_M, OPEN_M = 0.0, 0.08
+#: a gripper command below this closes the gripper, and the open and closed commands, m (the chunk stage's)
+CLOSING_BELOW_M, OPEN_M = GRIPPER_CLOSING_BELOW_M, GRIPPER_OPEN_M
+CLOSED_M = 0.0
 
 
 class GraspReflex:
