@@ -25,10 +25,20 @@ class ContactWorld(SimWorld):
                  if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or "").startswith(ROBOT_BODY_PREFIX)}
         self._robot_geom = robot_geom_mask(m, robot)
         self._gripper_cmd_m = 0.0
+        self._wrench_key: tuple | None = None  # the simulated state the cached wrench is of
+        self._wrench = np.zeros(6)
 
     def measured_wrench(self) -> np.ndarray:
-        """The wrench (6,) on the robot from its contacts, about the TCP, world frame (``external_wrench``)."""
-        return external_wrench(self.model, self.data, self._robot_geom, self.data.site_xpos[self._tcp])
+        """The wrench (6,) on the robot from its contacts, about the TCP, world frame (``external_wrench``), computed
+        once per simulated state: the step's progress and the next tick's robot state read the same one (a copy each)."""
+        self._refresh_kinematics()  # the TCP of this state (after a step it is the one the next robot state reads)
+        d = self.data
+        tcp = d.site_xpos[self._tcp]
+        key = (d.time, d.qpos.tobytes(), d.qvel.tobytes(), tcp.tobytes())
+        if self._wrench_key != key:
+            self._wrench = external_wrench(self.model, d, self._robot_geom, tcp)
+            self._wrench_key = key
+        return self._wrench.copy()
 
     def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
         """One step; the gripper's command is slewed at ``grip.GRIPPER_SPEED_M_S`` (the Franka Hand's fingers move at
