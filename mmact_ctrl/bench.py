@@ -1,6 +1,12 @@
 """Benchmark of the control layer: median and p99 per component, and the real-time factor of an episode.
 
     python -m mmact_ctrl.bench [--json PATH] [--calls N]
+    python -m mmact_ctrl.bench --floor [--floor-args "--source expert"] [--json PATH]
+
+``--floor``: the floor of the command path (``mmact_ctrl.bench_floor``): the bare calls a tick cannot avoid
+(``mj_step``, Pinocchio's terms, OSQP's warm-started solve, the safety check) timed in tight loops on the inputs of
+a recorded episode of the main job, beside our tick, the episode's wall time per simulated ms and, when mink is
+installed, mink's ``solve_ik`` on the same Panda, all in one run.
 
 Components: ``pinocchio`` (all robot terms for one state), ``qp`` (build + OSQP solve),
 ``ruckig`` (one smoother step, position and orientation), ``kf`` (one filter step),
@@ -187,9 +193,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sensor", default="scenarios.world.camera_sensor:make_camera_sensor",
                    help="module:function(world) that builds the camera sensor timed as the perception step ('' to skip)")
     p.add_argument("--json", metavar="PATH", help="write {component: {median_us, p99_us}, realtime_factor: x}")
+    p.add_argument("--floor", action="store_true",
+                   help="the floor of the command path beside our tick, the episode and mink (see above)")
+    p.add_argument("--floor-args", default="", metavar="SWITCHES",
+                   help="--floor: more switches of scenarios.moving_target for the main job's episodes "
+                        "(default: its own defaults, hybrid, linear target)")
+    p.add_argument("--floor-episodes", type=int, default=3, help="--floor: timed episodes (seeds 3, 4, ...)")
+    p.add_argument("--floor-recorder", default="scenarios.bench_floor:record_main_job",
+                   help="--floor: module:function(extra_args, episodes, seed, duration_s) -> FloorRecording")
     args = p.parse_args(argv)
     if args.calls < 10 or args.duration_s <= 0:
         p.error(f"--calls must be >= 10 and --duration-s > 0, got {args.calls} and {args.duration_s}")
+    if args.floor:
+        return _floor_main(args, p)
     results = bench_components(args.calls)
     results.update(bench_episode(args.world, args.source, args.duration_s))
     if args.sensor:
@@ -213,6 +229,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(results, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _floor_main(args: argparse.Namespace, p: argparse.ArgumentParser) -> int:
+    from mmact_ctrl.bench_floor import floor_report, format_floor
+
+    if args.floor_episodes < 1:
+        p.error(f"--floor-episodes must be >= 1, got {args.floor_episodes}")
+    try:
+        rec = _load(args.floor_recorder)(args.floor_args, args.floor_episodes, 3, args.duration_s)
+    except SystemExit as exc:  # a bad switch in --floor-args: argparse said which
+        p.error(f"--floor-args {args.floor_args!r} was refused (above), exit {exc.code}")
+    report = floor_report(rec)
+    print(format_floor(report))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(report, indent=2))
         print(f"wrote {args.json}")
     return 0
 

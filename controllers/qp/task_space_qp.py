@@ -133,6 +133,17 @@ class TaskSpaceQP:
         # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
         self._ext = self._solver._solver
 
+    def assembled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Copies of the last problem the fast path assembled, as OSQP takes it: ``(P_x, q, A_x, l, u)`` (the values
+        of the fixed sparsity patterns, the linear term, the bounds). What ``mmact_ctrl.bench --floor`` replays."""
+        return self._P_x.copy(), self._g.copy(), self._A_x.copy(), self._l.copy(), self._u.copy()
+
+    def bare_solver(self):
+        """A fresh OSQP problem on this QP's sparsity patterns and settings, its low-level object (``update_data_vec``,
+        ``update_data_mat``, ``solve``): the calls the fast path makes each tick, for the floor benchmark."""
+        self._setup_solver()
+        return self._ext
+
     def state(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> QPState:
         """What the tasks and limits read at this tick."""
         self._ensure_started(terms)
