@@ -79,6 +79,12 @@ def make_source_and_world(args: argparse.Namespace):
 
 def check_modes_of_running(args: argparse.Namespace) -> None:
     """One-line errors for switches that cannot go together (before any work)."""
+    if getattr(args, "grasp_reflex", False):
+        from mmact_ctrl.control.grasp_reflex import reflex_refusal
+
+        for mode in args.mode:
+            if not make_executor(mode).layers.reads_target:
+                raise ValueError(reflex_refusal(mode))
     if args.realtime:
         if args.video:
             raise ValueError("--video renders in the 1 kHz loop: not with --realtime (use --rerun PATH.rrd)")

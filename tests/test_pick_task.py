@@ -223,3 +223,16 @@ def test_the_gymnasium_environment_runs_the_pick_task_and_passes_check_env():
         from scenarios.world.gym_env import as_observation
 
         assert as_observation(info).target_pos_m[2] == pytest.approx(CUBE_REST_Z_M, abs=0.003)  # the cube, not a ball
+
+
+def test_the_grasp_reflex_is_refused_to_a_mode_that_does_not_read_the_object(capsys):
+    with pytest.raises(ValueError, match="--grasp-reflex needs the object's measurement, which --mode open_loop"):
+        HybridController(StackConfig(mode="open_loop", grasp_reflex=True))
+    HybridController(StackConfig(mode="hybrid", grasp_reflex=True))  # hybrid reads it
+    from scenarios.moving_target import main
+
+    with pytest.raises(SystemExit):  # refused before any episode runs, whichever mode comes first
+        main(["--task", "pick", "--source", "expert", "--mode", "hybrid", "open_loop", "--grasp-reflex",
+              "--episodes", "1", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "--mode open_loop does not read" in err[-1] and "Traceback" not in "".join(err)

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 32's figures (2026-12-04, the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
+# Issue 32's figures (pick rerun 2026-12-04 after the expert's wall-aware lead; insert 2026-12-03; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
 mt() { python -m scenarios.moving_target --source expert --episodes 50 --seed 1000 --duration-s 6 "$@"; }
@@ -8,6 +8,11 @@ mt --task pick --target linear --speed 0.2 --mode open_loop hybrid --json out/pi
 mt --task pick --target linear --speed 0.4 --mode open_loop hybrid --json out/pick_linear_0.4.json > pick_linear_0.4.txt
 mt --task pick --target reversal --speed 0.2 --mode open_loop hybrid --json out/pick_reversal_0.2.json > pick_reversal_0.2.txt
 mt --task pick --target jump --speed 0.2 --mode open_loop hybrid --json out/pick_jump_0.2.json > pick_jump_0.2.txt
+# the grasp reflex, a layer of the modes that read the object (hybrid here)
+for m in "static 0" "linear 0.2" "linear 0.4" "reversal 0.2" "jump 0.2"; do
+  set -- $m; tag=$1_$2; [ "$1" = static ] && tag=static
+  mt --task pick --target $1 --speed $2 --mode hybrid --grasp-reflex --json out/pick_${tag}_reflex.json > pick_${tag}_reflex.txt
+done
 mt --task insert --target static --speed 0 --clearance-mm 1.0 --mode open_loop hybrid --json out/insert_1mm.json > insert_static_1mm.txt
 mt --task insert --target static --speed 0 --clearance-mm 1.0 --compliance --mode hybrid open_loop --json out/insert_1mm_c.json > insert_static_1mm_compliance.txt
 # the bins x clearance x noise x mode x compliance table (2 seeds a cell: see README)

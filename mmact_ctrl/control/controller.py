@@ -29,7 +29,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
-from mmact_ctrl.control.grasp_reflex import GraspReflex
+from mmact_ctrl.control.grasp_reflex import GraspReflex, reflex_refusal
 from mmact_ctrl.control.plan_tracker import PlanTracker
 from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, SmoothedSample, TickOutput
 from mmact_ctrl.control.smoothing import SmoothingStage
@@ -71,6 +71,8 @@ class HybridController:
         self.qp = make_qp(config)
         self.executor = executor if executor is not None else make_executor(config.mode)
         layers = self.executor.layers
+        if config.grasp_reflex and not layers.reads_target:
+            raise ValueError(reflex_refusal(config.mode))
         self.reads_target = layers.reads_target
         self.smoothing = layers.smooth and config.use_ruckig
         self.use_mpc = layers.preview and config.use_mpc

@@ -5,7 +5,9 @@ A chunk closes the gripper at the time it planned to be at the object; if the ha
 stale chunk) the fingers close where the object *was*. With the reflex the gripper stays open while the chunk asks
 to close and the object's estimate is not yet between the fingers, and closes as soon as it is (even a little before
 the chunk asks); it opens again only when the chunk asks to open and the object is not between the fingers.
-Off, the chunk's gripper channel passes unchanged.
+Off, the chunk's gripper channel passes unchanged. It needs the object's measurement: a mode that does not read the
+target (``open_loop``, ``receding``, ...) cannot have it (:func:`reflex_refusal`, one line), rather than a reflex
+that never sees the object and never closes.
 """
 
 from __future__ import annotations
@@ -20,6 +22,15 @@ BETWEEN_XY_M, BETWEEN_Z_M = 0.012, 0.015
 #: a gripper command below this closes the gripper, and the open and closed commands, m (the chunk stage's)
 CLOSING_BELOW_M, OPEN_M = GRIPPER_CLOSING_BELOW_M, GRIPPER_OPEN_M
 CLOSED_M = 0.0
+
+
+def reflex_refusal(mode: str) -> str:
+    """The one line that refuses the reflex to ``mode``, which does not read the object's measurement."""
+    from mmact_ctrl.executors.registry import EXECUTORS
+
+    readers = ", ".join(name for name, cls in EXECUTORS.items() if cls.layers.reads_target)
+    return (f"--grasp-reflex needs the object's measurement, which --mode {mode} does not read "
+            f"(modes that read it: {readers})")
 
 
 class GraspReflex:

@@ -13,6 +13,12 @@ chunks, so whatever happened (a missed grasp, a drop) is planned from anew:
 - **open**: a minimum-jerk approach to ``APPROACH_ABOVE_M`` above where the cube will be, a descent to the grasp
   height, the gripper closed once there (over ``CLOSE_S``), then the lift; each waypoint aims where the cube will be
   at its own time (the lead; ``lead none`` aims where the cube is now).
+
+With the carrier's box known (``workspace_low_m`` / ``workspace_high_m``, read from the world as reach's expert
+does), the predicted course is reflected at its walls, as the carrier's is, and the descent is timed around a
+predicted bounce: the gripper does not close within ``BOUNCE_CLEAR_S`` after (or during the closing before) the cube
+turns at a wall; the hand hovers along the course up to ``MAX_WAIT_S`` first, and if no start clears the bounce it
+keeps hovering and the next chunk plans again. Every execution mode is given the same chunks.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from mmact_ctrl.chunk import ActionChunk, Observation
 from policy.action_tokenizer import ActionTokenizer
 from scenarios.world.expert import (GRIPPER_OPEN_M, LEADS, ExpertBase, expert_tokenizer, min_jerk,
                                     two_frame_velocity_m_s)
+from scenarios.world.motions import reflect_into_box
 from scenarios.world.tasks.pick_scene import CUBE_HALF_M, CUBE_REST_Z_M
 
 #: the approach passes this far above the cube before the descent, m
@@ -44,20 +51,30 @@ DESCEND_S, CLOSE_S, SETTLE_S = 0.5, 0.3, 0.1
 GRASP_ABOVE_CENTRE_M = 0.006
 #: a two-frame speed above this is a jump, not a motion (as the reach expert's), m/s
 MAX_LEAD_SPEED_M_S = 0.8
+#: the closing starts at least this long after a predicted wall bounce of the cube, s, and the descent waits above
+#: the course at most this long (in steps of the chunk's spacing) for a start that clears it, s
+BOUNCE_CLEAR_S, MAX_WAIT_S = 0.4, 0.5
+#: the grid the predicted course is searched for bounces on, s
+BOUNCE_GRID_S = 0.01
 
 
 @dataclass(frozen=True)
 class PickExpertConfig:
     """Attributes: horizon (waypoints), dt_s (their spacing, s), approach_speed_m_s (average TCP speed of the approach),
-    min_approach_s (s), lead (``none`` or ``velocity``)."""
+    min_approach_s (s), lead (``none`` or ``velocity``), workspace_low_m / workspace_high_m (the box the carrier
+    moves the cube in: the predicted course reflects at its walls; None: unbounded)."""
 
     horizon: int = 16
     dt_s: float = 0.1
     approach_speed_m_s: float = 0.3
     min_approach_s: float = 0.5
     lead: str = "velocity"
+    workspace_low_m: tuple[float, float, float] | None = None
+    workspace_high_m: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
+        if (self.workspace_low_m is None) != (self.workspace_high_m is None):
+            raise ValueError("PickExpertConfig: workspace_low_m and workspace_high_m are given together")
         if self.lead not in LEADS:
             raise ValueError(f"PickExpertConfig.lead must be one of {LEADS}, got {self.lead!r}")
         if self.horizon < 1 or not self.dt_s > 0:
@@ -67,6 +84,39 @@ class PickExpertConfig:
 def cube_velocity_m_s(config: PickExpertConfig, obs: Observation) -> np.ndarray:
     """The cube's horizontal velocity from two frames (zero without the lead, an earlier frame, or at a jump)."""
     return two_frame_velocity_m_s(obs, config.lead, MAX_LEAD_SPEED_M_S, horizontal=True)
+
+
+def predicted_course_m(config: PickExpertConfig, cube_m: np.ndarray, vel_m_s: np.ndarray,
+                       times_s: np.ndarray) -> np.ndarray:
+    """Where the cube will be at ``times_s`` (after the observation): constant velocity, reflected at the walls of
+    the carrier's box when it is known (N, 3), m."""
+    course = cube_m + np.asarray(times_s, dtype=float)[:, None] * vel_m_s
+    if config.workspace_low_m is None or not np.any(vel_m_s):
+        return course
+    low, high = np.asarray(config.workspace_low_m, dtype=float), np.asarray(config.workspace_high_m, dtype=float)
+    course[:, :2] = reflect_into_box(course[:, :2], low[:2], high[:2])
+    return course
+
+
+def bounce_times_s(config: PickExpertConfig, cube_m: np.ndarray, vel_m_s: np.ndarray, until_s: float) -> np.ndarray:
+    """The times (after the observation, up to ``until_s``) at which the predicted course turns at a wall, s."""
+    if config.workspace_low_m is None or not np.any(vel_m_s):
+        return np.zeros(0)
+    grid = np.arange(0.0, until_s + BOUNCE_GRID_S, BOUNCE_GRID_S)
+    step = np.diff(predicted_course_m(config, cube_m, vel_m_s, grid)[:, :2], axis=0)
+    turned = np.any(step[1:] * step[:-1] < 0.0, axis=1)
+    return grid[1:-1][turned]
+
+
+def descent_wait_s(config: PickExpertConfig, bounces_s: np.ndarray) -> float | None:
+    """How long the descent waits above the course so that no predicted bounce falls in ``BOUNCE_CLEAR_S`` before
+    the closing starts or during it: the shortest wait (a multiple of the chunk's spacing up to ``MAX_WAIT_S``), or
+    None when none clears."""
+    for wait in np.arange(0.0, MAX_WAIT_S + 1e-9, config.dt_s):
+        close = wait + DESCEND_S
+        if not np.any((bounces_s > close - BOUNCE_CLEAR_S) & (bounces_s < close + CLOSE_S)):
+            return float(wait)
+    return None
 
 
 class PickExpert(ExpertBase):
@@ -80,7 +130,7 @@ class PickExpert(ExpertBase):
         times = cfg.dt_s * np.arange(1, cfg.horizon + 1)
         cube = np.asarray(obs.target_pos_m, dtype=float)
         vel = cube_velocity_m_s(cfg, obs)
-        course = cube + times[:, None] * vel  # where the cube will be at each waypoint's time
+        course = predicted_course_m(cfg, cube, vel, times)  # where the cube will be at each waypoint's time
         tcp = np.asarray(obs.ee_pos_m, dtype=float)
         between = (np.linalg.norm((cube - tcp)[:2]) < BETWEEN_XY_M and abs(cube[2] - tcp[2]) < BETWEEN_Z_M)
         if obs.gripper_m < CLOSING_BELOW_M and between:
@@ -88,7 +138,7 @@ class PickExpert(ExpertBase):
         elif obs.gripper_m < CLOSING_BELOW_M:
             actions = self._reopen(tcp, times)
         else:
-            actions = self._approach(tcp, course, times, cube)
+            actions = self._approach(tcp, course, times, cube, vel)
         return self._finish(actions, obs)
 
     def _hold_and_lift(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray, closed: bool) -> np.ndarray:
@@ -113,14 +163,19 @@ class PickExpert(ExpertBase):
         a[:, 6] = GRIPPER_OPEN_M
         return a
 
-    def _approach(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray, cube_now: np.ndarray) -> np.ndarray:
-        """Open: when the TCP is above the cube (within ``ABOVE_XY_M``), down onto its course, close, lift; else a
-        minimum-jerk approach to ``APPROACH_ABOVE_M`` above the course and a hover along it (the next chunk, planned
-        from above, descends). Every waypoint is on the cube's course at its own time (the lead)."""
+    def _approach(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray, cube_now: np.ndarray,
+                  vel: np.ndarray) -> np.ndarray:
+        """Open: when the TCP is above the cube (within ``ABOVE_XY_M``), down onto its course (after a wait that
+        clears a predicted bounce, :func:`descent_wait_s`), close, lift; else a minimum-jerk approach to
+        ``APPROACH_ABOVE_M`` above the course and a hover along it (the next chunk, planned from above, descends).
+        Every waypoint is on the cube's course at its own time (the lead)."""
         above = course + np.array([0.0, 0.0, APPROACH_ABOVE_M])
         near = float(np.linalg.norm((cube_now - tcp)[:2])) < ABOVE_XY_M and tcp[2] < above[0, 2] + ABOVE_Z_M
+        wait = None
         if near:
-            return self._descend_close_lift(tcp, course, times)
+            wait = descent_wait_s(self.config, bounce_times_s(self.config, cube_now, vel, times[-1]))
+        if wait is not None:
+            return self._descend_close_lift(tcp, course, times, wait)
         cfg = self.config
         dist = float(np.linalg.norm(above[-1] - tcp))
         t_app = max(cfg.min_approach_s, dist / cfg.approach_speed_m_s)
@@ -130,13 +185,16 @@ class PickExpert(ExpertBase):
         a[:, 6] = GRIPPER_OPEN_M
         return a
 
-    def _descend_close_lift(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """From above the cube: down to its centre along its course, close once there, lift after ``SETTLE_S``."""
-        s_down = min_jerk(times / DESCEND_S)[:, None]
+    def _descend_close_lift(self, tcp: np.ndarray, course: np.ndarray, times: np.ndarray,
+                            wait_s: float = 0.0) -> np.ndarray:
+        """From above the cube: onto its course, down to its centre after ``wait_s``, close once there, lift after
+        ``SETTLE_S``."""
+        s_onto = min_jerk(times / DESCEND_S)[:, None]
+        s_down = min_jerk((times - wait_s) / DESCEND_S)
         pos = course.copy()
-        pos[:, 2] = tcp[2] + s_down[:, 0] * (course[:, 2] + GRASP_ABOVE_CENTRE_M - tcp[2])
-        pos[:, :2] = tcp[:2] + np.minimum(1.0, 2.0 * s_down) * (course[:, :2] - tcp[:2])
-        t_close = DESCEND_S
+        pos[:, 2] = tcp[2] + s_down * (course[:, 2] + GRASP_ABOVE_CENTRE_M - tcp[2])
+        pos[:, :2] = tcp[:2] + np.minimum(1.0, 2.0 * s_onto) * (course[:, :2] - tcp[:2])
+        t_close = wait_s + DESCEND_S
         s_lift = min_jerk((times - t_close - CLOSE_S - SETTLE_S) / 0.6)
         pos[:, 2] += s_lift * (CUBE_REST_Z_M + LIFT_TO_M - course[:, 2])
         a = np.zeros((len(times), 7))
@@ -149,4 +207,7 @@ def make_pick_expert(bins: int = 2048, horizon: int = 16, dt_s: float = 0.1, lea
                      world=None) -> PickExpert:
     """The pick expert, its chunks quantized through the shared action tokenizer (bins 0: not quantized)."""
     tokenizer = expert_tokenizer(bins)
-    return PickExpert(PickExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead), tokenizer)
+    box = {}
+    if world is not None:  # the carrier's box, as reach's expert reads the target workspace
+        box = dict(workspace_low_m=tuple(world.target.workspace_low_m), workspace_high_m=tuple(world.target.workspace_high_m))
+    return PickExpert(PickExpertConfig(horizon=horizon, dt_s=dt_s, lead=lead, **box), tokenizer)
