@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from controllers.mpc import MPCConfig
 from controllers.qp_id import QPConfig
 from controllers.retarget import RetargetConfig
@@ -71,6 +73,9 @@ class StackConfig:
             different ticks (together they made the slowest ticks); 0 in simulated time keeps the published results.
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
+        target_box_m: (low, high) corners of the box the target's carrier keeps it in (a contact task's conveyor or
+            fixture rail), m; the fast layer's predictions are reflected at its walls, as the task's chunk source's
+            lead is (``controllers.estimation.box``). None (reach): unbounded, as published.
         grasp_reflex: the fast layer closes the gripper when the measured object is between the fingers, and keeps
             it open until then, whatever the chunk's clock says (``mmact_ctrl.control.grasp_reflex``).
         compliance: the TCP tracks its reference as a spring-damper, stiff or soft per tool axis, whose force is
@@ -104,6 +109,7 @@ class StackConfig:
     contact_force_limit_n: float = 30.0
     grasp_reflex: bool = False
     compliance: bool = False
+    target_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
     filter: EstimatorConfig = field(default_factory=EstimatorConfig)
@@ -123,6 +129,11 @@ class StackConfig:
             raise ValueError(f"perception_hz must be in (0, {1.0 / self.dt_s:g}], got {self.perception_hz}")
         if not self.duration_s > 0:
             raise ValueError(f"duration_s must be > 0, got {self.duration_s}")
+        if self.target_box_m is not None:
+            low, high = (np.asarray(c, dtype=float) for c in self.target_box_m)
+            if low.shape != (3,) or high.shape != (3,) or not np.all(np.isfinite(low)) or not np.all(high > low):
+                raise ValueError(f"target_box_m must be (low, high) with 3 finite numbers each and high > low, got "
+                                 f"{self.target_box_m!r}")
         if self.receding_k < 0:
             raise ValueError(f"receding_k must be >= 0, got {self.receding_k}")
         if not self.ensemble_decay_per_s >= 0:

@@ -310,7 +310,7 @@ def _realtime_args(p: argparse.ArgumentParser) -> None:
 def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
     """The stack of ``mode`` from the switches; the task (``--task``) sets the TCP floor it needs and the axes a chunk is
     retargeted on (``scenarios.world.tasks``)."""
-    from scenarios.world.tasks.registry import task_by_name
+    from scenarios.world.tasks.registry import task_by_name, task_target_box
 
     task = task_by_name(getattr(args, "task", "reach"))
     return StackConfig(
@@ -321,6 +321,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         **({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
         contact_force_limit_n=getattr(args, "contact_force_limit_n", 30.0),
         grasp_reflex=bool(getattr(args, "grasp_reflex", False)),
+        target_box_m=task_target_box(task),
         compliance=bool(getattr(args, "compliance", False)),
         replan_hz=args.replan_hz,
         latency_ms=0.0 if args.latency_ms == "measured" else args.latency_ms,

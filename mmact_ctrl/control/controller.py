@@ -17,6 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from controllers.estimation.box import BoxedPrediction
 from controllers.mpc import TaskSpaceMPC
 from controllers.qp import TaskReference, TaskSpaceQP
 from controllers.qp.impedance import ImpedanceTask
@@ -79,6 +80,7 @@ class HybridController:
         self.q_post = self.model.home_q_rad
         _, self.rot_nominal = self.model.fk(self.q_post)
         self.filter = TargetEstimator(replace(config.filter, dt_s=1.0 / config.perception_hz))
+        self.estimate = self._estimate_view()
         sc = config.smoother
         self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
                                 in_hand=self._object_in_hand)
@@ -204,6 +206,7 @@ class HybridController:
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
+        self.estimate = self._estimate_view()
         tau_start = np.array(self.model.terms(q, dq).h)
         self.qp.reset(tau_start)
         if self.tracker is not None:
@@ -326,6 +329,12 @@ class HybridController:
         self._force_n = float(np.linalg.norm(force))
         self.chunk.touching = self._force_n > CONTACT_LATCH_N
         self.force_guard.update(force)
+
+    def _estimate_view(self):
+        """What the executors read of the target estimate: the estimator, or its predictions reflected at the walls of
+        ``config.target_box_m`` (``controllers.estimation.box``)."""
+        box = self.config.target_box_m
+        return self.filter if box is None else BoxedPrediction(self.filter, box[0], box[1])
 
     def _object_in_hand(self) -> bool:
         """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``)."""

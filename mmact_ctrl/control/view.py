@@ -27,8 +27,9 @@ class ExecutorView:
 
     @property
     def estimate(self):
-        """The target estimator of this episode (read it; it is fused by the controller)."""
-        return self._controller.filter
+        """The target estimator of this episode (read it; it is fused by the controller), its predictions reflected
+        at the walls of ``config.target_box_m`` when a task gives one."""
+        return self._controller.estimate
 
     @property
     def tcp_pos_m(self) -> np.ndarray | None:

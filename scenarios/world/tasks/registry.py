@@ -29,5 +29,16 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
     from controllers.retarget import RetargetConfig
 
     task = task_by_name(name)
+    box = task_target_box(task)
     return {**({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
+            **({"target_box_m": box} if box is not None else {}),
             "retarget": RetargetConfig(pull_axes=task.pull_axes), "compliance": bool(compliance)}
+
+
+def task_target_box(task) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+    """The box a contact task's carrier keeps its object in (``StackConfig.target_box_m``: the fast layer's
+    predictions reflect at its walls, as the task's expert's lead does); None for reach (unbounded, as published)."""
+    if not task.contact:
+        return None
+    spec = task.target_spec("linear", 0.1)  # the box is the task's, whatever the motion
+    return tuple(float(x) for x in spec.workspace_low_m), tuple(float(x) for x in spec.workspace_high_m)
