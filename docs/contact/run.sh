@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 32's figures (pick rerun 2026-12-04 after the expert's wall-aware lead; insert 2026-12-03; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
+# Issue 32's figures (rerun 2026-12-04 on the final code of that day: the wall-aware expert, the box in the fast layer; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
 mt() { python -m scenarios.moving_target --source expert --episodes 50 --seed 1000 --duration-s 6 "$@"; }
