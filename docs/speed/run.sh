@@ -9,3 +9,6 @@ python -m scenarios.moving_target --mode hybrid --target linear --episodes 3 --s
 # the sweep's scaling: 75 episodes with 1 and with 2 workers (wall time; results identical)
 /usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep1 --workers 1 --quiet
 /usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep2 --workers 2 --quiet
+# and on a 150-episode study (open_loop, receding, hybrid x linear, reversal x 25 seeds, 6 s)
+/usr/bin/time -f "%e s wall" python -m scenarios.sweep --grid scale_grid.json --out out/scale1 --workers 1 --quiet
+/usr/bin/time -f "%e s wall" python -m scenarios.sweep --grid scale_grid.json --out out/scale2 --workers 2 --quiet
