@@ -86,7 +86,8 @@ def pinocchio_floor(q_rad: np.ndarray, dq_rad_s: np.ndarray, controller: HybridC
 
 def osqp_floor(qp_data: tuple[np.ndarray, ...], controller: HybridController) -> np.ndarray:
     """OSQP's warm-started update and solve of each recorded QP, in tick order, s per tick."""
-    ext = controller.qp.bare_solver()
+    solver = controller.qp.bare_solver()
+    ext = solver._solver  # the low-level object the fast path drives (``TaskSpaceQP._setup_solver``)
     P_x, g, A_x, lo, up = qp_data
     out = np.empty(len(g))
     for i in range(len(g)):

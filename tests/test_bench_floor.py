@@ -19,7 +19,8 @@ def recording():
 
 
 def test_the_replayed_qps_are_the_ones_the_episode_solved(recording):
-    ext = HybridController(StackConfig()).qp.bare_solver()
+    solver = HybridController(StackConfig()).qp.bare_solver()
+    ext = solver._solver
     P_x, g, A_x, lo, up = recording.qp_data
     assert len(g) > 500 and g.shape[1] == 7
     worst = 0.0

@@ -18,11 +18,13 @@ MIN_EXTENT_M = 0.01
 
 def fold(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unbounded coordinates reflected into ``[low, high]`` (a triangle wave), and the sign (+1 / -1) a velocity takes
-    there (the same shapes as ``x``)."""
+    there (the same shapes as ``x``). The wave of the target motions' and the experts' ``reflect_into_box``
+    (``scenarios.world.motions``, beyond this package's wall), with the sign, and a coordinate inside the box kept to
+    the bit (``low + (x - low)`` need not be ``x``)."""
     width = high - low
     u = np.mod(x - low, 2.0 * width)
     back = u > width
-    inside = (x >= low) & (x <= high)  # unchanged to the bit (low + (x - low) need not be x)
+    inside = (x >= low) & (x <= high)
     return np.where(inside, x, low + np.where(back, 2.0 * width - u, u)), np.where(back, -1.0, 1.0)
 
 
@@ -39,30 +41,26 @@ class BoxedPrediction:
     def __getattr__(self, name: str):
         return getattr(self._est, name)
 
-    def _inside(self) -> np.ndarray:
-        """The box's axes on which the estimate (at its last fused time) is inside the box."""
+    def _walls(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(axes, low, high) of the box's axes on which the estimate (at its last fused time) is inside the box."""
         p = self._est.pos_m[self._axes]
-        return self._axes[(p >= self._low) & (p <= self._high)]
-
-    def _bounds(self, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        idx = np.searchsorted(self._axes, axes)
-        return self._low[idx], self._high[idx]
+        keep = (p >= self._low) & (p <= self._high)
+        return self._axes[keep], self._low[keep], self._high[keep]
 
     def predict_pos(self, t_s: float) -> np.ndarray:
         p = np.array(self._est.predict_pos(t_s), dtype=float)
-        axes = self._inside()
-        p[axes] = fold(p[axes], *self._bounds(axes))[0]
+        axes, low, high = self._walls()
+        p[axes] = fold(p[axes], low, high)[0]
         return p
 
     def predict_pos_many(self, times_s: np.ndarray) -> np.ndarray:
         p = np.array(self._est.predict_pos_many(times_s), dtype=float)
-        axes = self._inside()
-        p[:, axes] = fold(p[:, axes], *self._bounds(axes))[0]
+        axes, low, high = self._walls()
+        p[:, axes] = fold(p[:, axes], low, high)[0]
         return p
 
     def predict_vel(self, t_s: float) -> np.ndarray:
         v = np.array(self._est.predict_vel(t_s), dtype=float)
-        axes = self._inside()
-        sign = fold(self._est.predict_pos(t_s)[axes], *self._bounds(axes))[1]
-        v[axes] = v[axes] * sign
+        axes, low, high = self._walls()
+        v[axes] = v[axes] * fold(self._est.predict_pos(t_s)[axes], low, high)[1]
         return v

@@ -121,14 +121,19 @@ class TaskSpaceQP:
         #: bias torque h of that first state, i.e. the robot holding itself as it does before a controller starts)
         self.tau_last: np.ndarray | None = None
 
-    def _setup_solver(self) -> None:
-        """(Re)build the OSQP problem on the fixed sparsity patterns (~0.3 ms): no warm start or adapted rho left."""
+    def _new_solver(self) -> osqp.OSQP:
+        """An OSQP problem set up on the fixed sparsity patterns (~0.3 ms), with this QP's settings."""
         n, s = self.n, self.config.solver
-        self._solver = osqp.OSQP()
-        self._solver.setup(P=sp.csc_matrix(self._p_pattern), q=np.zeros(n), A=sp.csc_matrix(self._a_pattern),
-                           l=-np.ones(2 * n), u=np.ones(2 * n), verbose=False, warm_starting=True, polishing=False,
-                           eps_abs=s.eps, eps_rel=s.eps, max_iter=s.max_iter, check_termination=5,
-                           adaptive_rho_interval=25)  # a fixed interval keeps runs deterministic (0 = by setup time)
+        solver = osqp.OSQP()
+        solver.setup(P=sp.csc_matrix(self._p_pattern), q=np.zeros(n), A=sp.csc_matrix(self._a_pattern),
+                     l=-np.ones(2 * n), u=np.ones(2 * n), verbose=False, warm_starting=True, polishing=False,
+                     eps_abs=s.eps, eps_rel=s.eps, max_iter=s.max_iter, check_termination=5,
+                     adaptive_rho_interval=25)  # a fixed interval keeps runs deterministic (0 = by setup time)
+        return solver
+
+    def _setup_solver(self) -> None:
+        """(Re)build the OSQP problem: no warm start or adapted rho left."""
+        self._solver = self._new_solver()
         # The low-level solver object: the high-level wrapper's update()/solve() spend ~50 us per tick
         # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
         self._ext = self._solver._solver
@@ -138,11 +143,11 @@ class TaskSpaceQP:
         of the fixed sparsity patterns, the linear term, the bounds). What ``mmact_ctrl.bench --floor`` replays."""
         return self._P_x.copy(), self._g.copy(), self._A_x.copy(), self._l.copy(), self._u.copy()
 
-    def bare_solver(self):
-        """A fresh OSQP problem on this QP's sparsity patterns and settings, its low-level object (``update_data_vec``,
-        ``update_data_mat``, ``solve``): the calls the fast path makes each tick, for the floor benchmark."""
-        self._setup_solver()
-        return self._ext
+    def bare_solver(self) -> osqp.OSQP:
+        """A fresh OSQP problem on this QP's sparsity patterns and settings, apart from the one this QP solves with
+        (its warm start untouched); its low-level object ``._solver`` takes the calls the fast path makes each tick
+        (``update_data_vec``, ``update_data_mat``, ``solve``): the floor benchmark times them."""
+        return self._new_solver()
 
     def state(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> QPState:
         """What the tasks and limits read at this tick."""
