@@ -185,9 +185,25 @@ def collect(cfg: CollectConfig, out: Path, workers: int = 1, episodes_per_shard:
     return total
 
 
+def _format_of(argv: list[str]) -> str:
+    """The ``--format`` given (``npz`` when none): ``lerobot`` hands the whole command to ``collect_lerobot``."""
+    fmt = argparse.ArgumentParser(add_help=False)
+    fmt.add_argument("--format", default="npz")
+    known, _ = fmt.parse_known_args(argv)
+    return known.format
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if _format_of(argv) == "lerobot":
+        from scenarios.collect_lerobot import main as lerobot_main
+
+        return lerobot_main(argv)
     p = argparse.ArgumentParser(prog="python -m scenarios.collect", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--format", choices=("npz", "lerobot"), default="npz",
+                   help="npz: the token policy's training shards (this help); lerobot: a LeRobotDataset v3.0 of any "
+                        "source's episodes (python -m scenarios.collect --format lerobot --help)")
     p.add_argument("--episodes", type=int, default=1000, help="number of episodes")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--objects", type=int, default=0, choices=(0, 1, 2), help="objects per scene (0: random mix of 1 and 2)")

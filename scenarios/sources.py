@@ -6,6 +6,7 @@
 - ``expert``: the scripted expert (``--expert-lead``, ``--bins``, ``--horizon``, ``--chunk-dt-s``);
 - ``module.path:factory`` or ``path/to/file.py:factory``: any callable returning a chunk source, called with the
   ``--source-arg key=value`` settings (``mmact_ctrl.sources.loader``);
+- ``lerobot:DIR[:episode]``: a LeRobot dataset's recorded actions replayed as chunks (``mmact_ctrl.sources.replay``);
 - ``ws://HOST:PORT``: a policy server speaking openpi's protocol (``mmact_ctrl.sources.openpi``), in the convention
   it was trained in: ``--preset libero|droid|mmact|FILE.json`` and the pieces' own switches (``--obs-mapping``,
   ``--action-space``, ``--gripper``, ``--delta-from``, ``--action-rotation``, ``--action-scale``, ``--action-clip``,
@@ -28,16 +29,21 @@ BUILTIN_SOURCES: tuple[str, ...] = ("policy", "expert")
 
 
 def source_kind(spec: str) -> str:
-    """``policy``, ``expert``, ``remote`` (a ``ws://`` URL) or ``plugin`` (``module:factory``)."""
+    """``policy``, ``expert``, ``remote`` (a ``ws://`` URL), ``replay`` (``lerobot:DIR``) or ``plugin``
+    (``module:factory``)."""
     from mmact_ctrl.sources.loader import is_plugin_spec
+    from mmact_ctrl.sources.replay import is_replay_spec
 
     if spec in BUILTIN_SOURCES:
         return spec
+    if is_replay_spec(spec):
+        return "replay"
     if spec.startswith(("ws://", "wss://")):
         return "remote"
     if is_plugin_spec(spec):
         return "plugin"
-    raise ValueError(f"--source {spec!r} is none of policy, expert, module.path:factory, file.py:factory, ws://HOST:PORT")
+    raise ValueError(f"--source {spec!r} is none of policy, expert, module.path:factory, file.py:factory, "
+                     "lerobot:DIR[:episode], ws://HOST:PORT")
 
 
 def source_spec_arg(text: str) -> str:
@@ -63,6 +69,7 @@ CONVENTION_FIELDS: dict[str, str] = {
     "image_rotation": "image_rotation_deg",
 }
 _KIND_WORDS = {"policy": "--source policy", "expert": "--source expert", "plugin": "a --source module:factory",
+               "replay": "a --source lerobot:DIR",
                "remote": "a --source ws://HOST:PORT"}
 
 
@@ -172,6 +179,12 @@ def build_source(settings: SourceSettings, world=None):
                            lead=settings.expert_lead, world=world)
     if kind == "remote":
         return _remote(settings)
+    if kind == "replay":
+        from mmact_ctrl.sources.loader import wrap_source
+        from mmact_ctrl.sources.replay import LeRobotReplay, parse_replay_spec
+
+        root, episode = parse_replay_spec(settings.spec)
+        return wrap_source(LeRobotReplay(root, episode), f"--source {settings.spec}")
     from mmact_ctrl.sources.loader import load_source
 
     return load_source(settings.spec, settings.args)

@@ -108,6 +108,7 @@ class SimWorld:
         self._meas_rng: np.random.Generator | None = None
         self._renderer: mujoco.Renderer | None = None
         self._video_renderer: mujoco.Renderer | None = None
+        self._views_renderer: mujoco.Renderer | None = None  # render_views's, at the size it was last asked for
         self._render_process = None  # scenarios.world.render_worker.RenderProcess, started by render_snapshot
         self._kinematics_stale = True
 
@@ -273,6 +274,24 @@ class SimWorld:
         self._video_renderer.update_scene(self.data, camera=camera or self.scene.camera_names[0])
         return self._video_renderer.render()
 
+    def render_views(self, cameras: tuple[str, ...], size_px: int) -> np.ndarray:
+        """Frames ``(V, size_px, size_px, 3)`` uint8 of ``cameras`` (any of the scene's), from a renderer of their
+        own: a dataset's views, whatever size and cameras the source driving the arm sees (:meth:`render`)."""
+        self._require_reset()
+        size = int(size_px)
+        r = self._views_renderer
+        if r is None or r.height != size:
+            if r is not None:
+                r.close()
+            self._views_renderer = r = mujoco.Renderer(self.model, height=size, width=size)
+        self._refresh_kinematics()
+        mujoco.mj_camlight(self.model, self.data)
+        frames = []
+        for name in cameras:
+            r.update_scene(self.data, camera=name)
+            frames.append(r.render())
+        return np.stack(frames)
+
     def target_jump_times_s(self) -> tuple[float, ...]:
         """Times (s) at which the instructed object teleports this episode."""
         self._require_reset()
@@ -307,7 +326,7 @@ class SimWorld:
 
     def close(self) -> None:
         """Free the renderers (the world stays usable; a later ``render`` makes a new one)."""
-        for name in ("_renderer", "_video_renderer", "_render_process"):
+        for name in ("_renderer", "_video_renderer", "_views_renderer", "_render_process"):
             renderer = getattr(self, name)
             if renderer is not None:
                 renderer.close()
