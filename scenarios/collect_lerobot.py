@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mmact_ctrl.datasets.video import PIX_FMTS
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.lerobot_episode import ACTION_SPACES, FrameSettings
 from scenarios.world.panda_scene import AVAILABLE_CAMERAS
@@ -53,7 +54,7 @@ ROBOT_TYPE = "franka_panda"
 MMACT_META = "meta/mmact.json"
 #: switches of the export itself (not of the episode): kept out of the replay's arguments
 EXPORT_KEYS: tuple[str, ...] = ("format", "out", "fps", "image_size_px", "dataset_action_space", "show", "rerun",
-                                "episode", "quiet", "verify")
+                                "episode", "quiet", "verify", "pix_fmt")
 
 
 def check_fps(fps: int) -> int:
@@ -79,8 +80,8 @@ def _size_arg(text: str) -> int:
     except ValueError:
         raise argparse.ArgumentTypeError(f"--image-size-px {text!r} is not an integer") from None
     if not (16 <= size <= 480) or size % 2:
-        raise argparse.ArgumentTypeError(f"--image-size-px {size}: an even size in 16 .. 480 px (h264's yuv420p "
-                                         "halves the colour planes)")
+        raise argparse.ArgumentTypeError(f"--image-size-px {size}: an even size in 16 .. 480 px (h264 in yuv420p "
+                                         "halves the colour planes: it needs even sides)")
     return size
 
 
@@ -103,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--cameras", nargs="+", default=["front", "side"], choices=AVAILABLE_CAMERAS, metavar="NAME",
                    help=f"cameras recorded, of {', '.join(AVAILABLE_CAMERAS)}")
     d.add_argument("--image-size-px", type=_size_arg, default=96, help="side of the square camera frames")
+    d.add_argument("--pix-fmt", choices=PIX_FMTS, default=PIX_FMTS[0],
+                   help="the videos' pixel format: yuv444p keeps the colour of a 4-px ball (PSNR 40 dB at 96 px); "
+                        "yuv420p (LeRobot's default) plays in a web browser but halves the colour planes (35 dB)")
     d.add_argument("--action-space", dest="dataset_action_space", choices=ACTION_SPACES, default="tcp_pose",
                    help="the action feature: tcp_pose (the commanded TCP pose + gripper, 7) or joint_pos (the joints "
                         "reached by the next frame + gripper, 8)")
@@ -124,14 +128,16 @@ def settings_of(args: argparse.Namespace) -> FrameSettings:
                          action_space=args.dataset_action_space)
 
 
-def schema_of(settings: FrameSettings):
+def schema_of(settings: FrameSettings, pix_fmt: str = PIX_FMTS[0]):
+    from mmact_ctrl.datasets.video import VideoSettings
     from mmact_ctrl.datasets.writer import DatasetSchema, VectorFeature
 
     action = TCP_ACTION_NAMES if settings.action_space == "tcp_pose" else JOINT_ACTION_NAMES
     return DatasetSchema(fps=settings.fps, robot_type=ROBOT_TYPE, cameras=settings.cameras,
                          image_size_px=settings.image_size_px,
                          vectors=(VectorFeature("observation.state", STATE_NAMES), VectorFeature("action", action),
-                                  VectorFeature("target_pos_m", TARGET_NAMES)))
+                                  VectorFeature("target_pos_m", TARGET_NAMES)),
+                         video=VideoSettings(fps=settings.fps, pix_fmt=pix_fmt))
 
 
 def _episode_row(i: int, ep) -> dict:
@@ -144,7 +150,7 @@ def _episode_row(i: int, ep) -> dict:
     return row
 
 
-def collect_lerobot(args: argparse.Namespace) -> dict:
+def collect_lerobot(args: argparse.Namespace, argv: list[str] | None = None) -> dict:
     """Run ``args.episodes`` episodes and write them to ``args.out``; returns the run's figures."""
     from tqdm import tqdm
 
@@ -158,7 +164,7 @@ def collect_lerobot(args: argparse.Namespace) -> dict:
     if len(args.mode) != 1:
         raise ValueError(f"--mode {' '.join(args.mode)}: a dataset is collected in one mode")
     settings = settings_of(args)
-    writer = LeRobotWriter(args.out, schema_of(settings))  # refuses a non-empty --out before any work
+    writer = LeRobotWriter(args.out, schema_of(settings, args.pix_fmt))  # refuses a non-empty --out before any work
     cfg = stack_config(args, args.mode[0])
     check_modes_of_running(args)
     source, world = make_source_and_world(args)
@@ -194,10 +200,12 @@ def collect_lerobot(args: argparse.Namespace) -> dict:
         world.close()
         if kept is not None:
             kept.cleanup()
-    meta = {"command": " ".join(["python -m scenarios.collect", *sys.argv[1:]]),
+    given = list(sys.argv[1:] if argv is None else argv)
+    meta = {"command": " ".join(["python -m scenarios.collect", *given]),
             "args": {k: v for k, v in vars(args).items() if k not in EXPORT_KEYS and _jsonable(v)},
             "frame_settings": {"fps": settings.fps, "cameras": list(settings.cameras),
-                               "image_size_px": settings.image_size_px, "action_space": settings.action_space},
+                               "image_size_px": settings.image_size_px, "action_space": settings.action_space,
+                               "pix_fmt": args.pix_fmt},
             "figures": figures, "episodes": rows}
     (Path(args.out) / MMACT_META).write_text(json.dumps(meta, indent=2))
     return figures
@@ -225,6 +233,7 @@ def _jsonable(value) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     try:
         if args.show:
@@ -234,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if not args.out:
             raise ValueError("--out DIR is needed (or --show DIR to look at a dataset)")
-        figures = collect_lerobot(args)
+        figures = collect_lerobot(args, argv)
     except (ValueError, FileNotFoundError, RuntimeError, ConnectionError, TimeoutError) as exc:
         parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     from scenarios.lerobot_show import show

@@ -34,6 +34,8 @@ def serve_argv(settings) -> list[str]:
         argv += ["--expert-lead", settings.expert_lead, "--bins", str(settings.bins), "--horizon", str(settings.horizon)]
         if settings.chunk_dt_s:
             argv += ["--chunk-dt-s", str(settings.chunk_dt_s)]
+    elif kind == "replay":
+        pass  # the dataset says what its actions are
     elif kind == "plugin":
         import json
 

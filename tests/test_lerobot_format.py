@@ -14,6 +14,7 @@ from mmact_ctrl.datasets.frame_actions import ChunkActivation, chunk_value_at, f
 from mmact_ctrl.datasets.reader import LeRobotDataset  # noqa: E402
 from mmact_ctrl.datasets.roundtrip import check_indices, round_trip  # noqa: E402
 from mmact_ctrl.datasets.stats import sample_indices  # noqa: E402
+from mmact_ctrl.datasets.video import VideoSettings  # noqa: E402
 from mmact_ctrl.datasets.writer import DatasetSchema, EpisodeData, LeRobotWriter, VectorFeature  # noqa: E402
 
 FPS = 10
@@ -28,16 +29,17 @@ def _frames(rng, n, shift):
                      for k in range(n)])
 
 
-def _schema(cameras=("front", "side")):
+def _schema(cameras=("front", "side"), pix_fmt="yuv444p"):
     return DatasetSchema(fps=FPS, robot_type="franka_panda", cameras=cameras, image_size_px=SIZE,
+                         video=VideoSettings(fps=FPS, pix_fmt=pix_fmt),
                          vectors=(VectorFeature("observation.state", tuple(f"q{i}" for i in range(8))),
                                   VectorFeature("action", tuple(f"a{i}" for i in range(7))),
                                   VectorFeature("target_pos_m", ("x_m", "y_m", "z_m"))))
 
 
-def _write(root, lengths, seed=0, cameras=("front", "side")):
+def _write(root, lengths, seed=0, cameras=("front", "side"), pix_fmt="yuv444p"):
     rng = np.random.default_rng(seed)
-    writer = LeRobotWriter(root, _schema(cameras))
+    writer = LeRobotWriter(root, _schema(cameras, pix_fmt))
     episodes = []
     for i, n in enumerate(lengths):
         ep = EpisodeData(task=f"task {i % 3}", images={c: _frames(rng, n, j + i) for j, c in enumerate(cameras)},
@@ -73,7 +75,7 @@ def test_info_json_has_every_key_of_the_specification(written):
     cam = f["observation.images.front"]
     assert cam["dtype"] == "video" and cam["shape"] == [SIZE, SIZE, 3] and cam["names"] == ["height", "width", "channels"]
     assert cam["info"]["video.codec"] == "h264" and cam["info"]["video.fps"] == FPS
-    assert cam["info"]["video.pix_fmt"] == "yuv420p" and cam["info"]["video.height"] == SIZE
+    assert cam["info"]["video.pix_fmt"] == "yuv444p" and cam["info"]["video.height"] == SIZE
     assert f["observation.state"] == {"dtype": "float32", "shape": [8], "names": [f"q{i}" for i in range(8)]}
     assert list(f)[-5:] == ["timestamp", "frame_index", "episode_index", "index", "task_index"]
     assert f["timestamp"]["dtype"] == "float32" and f["index"]["dtype"] == "int64"
@@ -161,6 +163,13 @@ def test_every_frame_reads_back_at_its_timestamp(written):
     rt = round_trip(LeRobotDataset.open(root), lambda ep, key: episodes[ep].images[key.split(".")[-1]])
     assert rt.frames == 2 * sum(ep.length for ep in episodes) and rt.frames_missing == 0
     assert rt.timestamp_error_max_s < 1e-6 and rt.psnr_min_db >= 35.0 and rt.ok()
+
+
+def test_yuv420p_is_written_and_read_back_too(tmp_path):
+    info, episodes = _write(tmp_path / "420", [6, 5], cameras=("front",), pix_fmt="yuv420p")
+    assert info["features"]["observation.images.front"]["info"]["video.pix_fmt"] == "yuv420p"
+    rt = round_trip(LeRobotDataset.open(tmp_path / "420"), lambda ep, key: episodes[ep].images["front"])
+    assert rt.frames == 11 and rt.frames_missing == 0 and rt.psnr_min_db > 30.0
 
 
 def test_a_changed_frame_fails_the_round_trip(written):

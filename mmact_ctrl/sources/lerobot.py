@@ -44,6 +44,8 @@ class LeRobotSource:
         preprocess, postprocess: the policy's own normalization pipelines, when it keeps them outside.
         device: the torch device the batch is put on.
         name: how reports name it (default: the policy's class).
+        image_size_px: the side of the square frames it reads (None: the scene's default, 96 px); a policy trained
+            on one of our LeRobot exports takes it, with the rest, from ``mmact_ctrl.datasets.conventions``.
     """
 
     declared_capabilities = frozenset()
@@ -51,7 +53,7 @@ class LeRobotSource:
     def __init__(self, policy, action_space: ActionSpace, cameras: Mapping[str, str] | None = None,
                  state_fields: tuple[str, ...] = ("q_rad", "gripper_m"),
                  preprocess: Callable[[dict], dict] | None = None, postprocess: Callable | None = None,
-                 device: str = "cpu", name: str | None = None) -> None:
+                 device: str = "cpu", name: str | None = None, image_size_px: int | None = None) -> None:
         if not callable(getattr(policy, "predict_action_chunk", None)):
             raise ValueError(f"{type(policy).__name__} has no predict_action_chunk(batch): not a LeRobot-interface policy")
         bad = [f for f in state_fields if f not in STATE_FIELDS]
@@ -67,6 +69,8 @@ class LeRobotSource:
         self.device = device
         self.name = name or type(policy).__name__
         self.needs_image = bool(self.cameras)
+        if image_size_px is not None:  # the frames' size it was trained on (the scene renders them so)
+            self.image_size_px = int(image_size_px)
 
     @property
     def camera_names(self) -> tuple[str, ...]:

@@ -21,16 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from mmact_ctrl.chunk import Observation
+from mmact_ctrl.datasets.conventions import action_space_of
 from mmact_ctrl.datasets.reader import LeRobotDataset
-from mmact_ctrl.sources.action_space import ActionSpace
 from mmact_ctrl.sources.contract import SourceError
 
 PREFIX = "lerobot:"
-#: the action names of the spaces a replay understands -> the action space's kind
-KNOWN_ACTIONS: dict[tuple[str, ...], str] = {
-    ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad", "gripper_m"): "tcp_pose",
-    tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",): "joint_pos",
-}
 
 
 def is_replay_spec(spec: str) -> bool:
@@ -59,13 +54,11 @@ class LeRobotReplay:
             self.dataset = ds = LeRobotDataset.open(root)
         except (FileNotFoundError, ValueError, RuntimeError) as exc:
             raise SourceError(f"--source lerobot:{root}: {exc}") from None
-        names = tuple(ds.features.get("action", {}).get("names") or ())
-        kind = KNOWN_ACTIONS.get(names)
-        if kind is None:
-            raise SourceError(f"--source lerobot:{root}: action names {list(names)} are not a space this replay knows "
-                              f"({' or '.join(KNOWN_ACTIONS.values())}: {[list(k) for k in KNOWN_ACTIONS]})")
+        try:
+            self.action_space = action_space_of(ds.info, f"--source lerobot:{root}")
+        except ValueError as exc:
+            raise SourceError(str(exc)) from None
         self.fps = ds.fps
-        self.action_space = ActionSpace(kind=kind, gripper="width_m", dt_s=1.0 / self.fps)
         available = [int(r["episode_index"]) for r in ds.episodes]
         if episode is not None and episode not in available:
             raise SourceError(f"--source lerobot:{root}:{episode}: no such episode (it has {len(available)}: "
