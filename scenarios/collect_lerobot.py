@@ -15,8 +15,8 @@ What a frame holds (``meta/info.json`` says it too):
 ``observation.state``             joints (rad) + gripper opening (m), 8
 ``action``                        ``--action-space tcp_pose``: the command active at the frame, the TCP pose for the
                                   next frame's time ``[x, y, z (m), rx, ry, rz (rad, rotation vector relative to
-                                  the nominal grasp), gripper (m)]``, 7; ``joint_pos``: the joints the command brought
-                                  the robot to by the next frame + the gripper command, 8
+                                  the nominal grasp), gripper (m)]``, 7; ``joint_pos``: the same command in joints (its
+                                  inverse kinematics from the arm's own posture) + the gripper command, 8
 ``target_pos_m``                  the instructed object's true position (for analysis only: no policy input)
 
 ``meta/mmact.json`` (ours, beside LeRobot's files) holds what made the dataset (the command, every switch) and each
@@ -108,8 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the videos' pixel format: yuv444p keeps the colour of a 4-px ball (PSNR 40 dB at 96 px); "
                         "yuv420p (LeRobot's default) plays in a web browser but halves the colour planes (35 dB)")
     d.add_argument("--action-space", dest="dataset_action_space", choices=ACTION_SPACES, default="tcp_pose",
-                   help="the action feature: tcp_pose (the commanded TCP pose + gripper, 7) or joint_pos (the joints "
-                        "reached by the next frame + gripper, 8)")
+                   help="the action feature: tcp_pose (the commanded TCP pose + gripper, 7) or joint_pos (the same "
+                        "command in joints, inverse kinematics from the arm's posture, + gripper, 8)")
     d.add_argument("--verify", action="store_true",
                    help="after writing, read every frame back with PyAV and compare it with the rendered one (PSNR), "
                         "and check every timestamp and index range (the rendered frames wait in a temporary folder)")

@@ -174,3 +174,29 @@ def test_a_policy_trained_on_an_export_runs_in_its_conventions(reach):
     m = episode_metrics(log)
     assert m["success"] == meta["episodes"][0]["success"]
     assert abs(m["final_error_m"] - meta["episodes"][0]["final_error_m"]) < 0.002
+
+
+def test_joint_actions_are_the_commanded_pose_in_joints():
+    """``joint_pos`` records the command (its inverse kinematics from the posture reached), not the joints reached:
+    the forward kinematics of each action is the commanded TCP pose, and the posture stays the arm's."""
+    from controllers.rotations import rotvec_from_rot
+    from mmact_ctrl.config import StackConfig
+    from mmact_ctrl.controller import HybridController
+    from scenarios.lerobot_episode import joint_actions
+
+    ctrl = HybridController(StackConfig())
+    rng = np.random.default_rng(0)
+    q_cmd = ctrl.model.home_q_rad + rng.normal(0.0, 0.15, size=(6, 7))
+    tcp = np.empty((6, 7))
+    for m, q in enumerate(q_cmd):
+        pos, rot = ctrl.model.fk(q)
+        tcp[m, :3], tcp[m, 3:6], tcp[m, 6] = pos, rotvec_from_rot(rot, ctrl.rot_nominal), 0.08 - 0.01 * m
+    q_reached = q_cmd + rng.normal(0.0, 0.02, size=q_cmd.shape)  # the arm lags its command
+    act = joint_actions(ctrl, tcp, q_reached)
+    assert act.shape == (6, 8) and np.allclose(act[:, 7], tcp[:, 6])
+    for m in range(6):
+        pos, rot = ctrl.model.fk(act[m, :7])
+        assert np.linalg.norm(pos - tcp[m, :3]) < 1e-5
+        assert np.linalg.norm(rotvec_from_rot(rot, ctrl.rot_nominal) - tcp[m, 3:6]) < 1e-4
+        assert np.abs(act[m, :7] - q_reached[m]).max() < 0.1  # the nearby solution, not another branch
+        assert np.abs(act[m, :7] - q_reached[m]).max() > 1e-4  # not the joints reached
