@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mmact_ctrl.datasets.conventions import JOINT_ACTION_NAMES, STATE_FEATURE_NAMES, TCP_ACTION_NAMES
 from mmact_ctrl.datasets.video import PIX_FMTS
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.lerobot_episode import ACTION_SPACES, FrameSettings
@@ -45,10 +46,6 @@ PROG = "python -m scenarios.collect --format lerobot"
 #: 15 and 30 fps, whose frames are taken at the nearest tick (at most 1/3 ms from ``m / fps``)
 TICK_FPS: tuple[int, ...] = tuple(f for f in range(1, 1001) if 1000 % f == 0)
 CAMERA_FPS: tuple[int, ...] = (15, 30)
-#: the joint and gripper names of ``observation.state``
-STATE_NAMES: tuple[str, ...] = tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",)
-TCP_ACTION_NAMES: tuple[str, ...] = ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad", "gripper_m")
-JOINT_ACTION_NAMES: tuple[str, ...] = tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",)
 TARGET_NAMES: tuple[str, ...] = ("x_m", "y_m", "z_m")
 ROBOT_TYPE = "franka_panda"
 MMACT_META = "meta/mmact.json"
@@ -135,7 +132,7 @@ def schema_of(settings: FrameSettings, pix_fmt: str = PIX_FMTS[0]):
     action = TCP_ACTION_NAMES if settings.action_space == "tcp_pose" else JOINT_ACTION_NAMES
     return DatasetSchema(fps=settings.fps, robot_type=ROBOT_TYPE, cameras=settings.cameras,
                          image_size_px=settings.image_size_px,
-                         vectors=(VectorFeature("observation.state", STATE_NAMES), VectorFeature("action", action),
+                         vectors=(VectorFeature("observation.state", STATE_FEATURE_NAMES), VectorFeature("action", action),
                                   VectorFeature("target_pos_m", TARGET_NAMES)),
                          video=VideoSettings(fps=settings.fps, pix_fmt=pix_fmt))
 

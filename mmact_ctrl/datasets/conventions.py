@@ -14,15 +14,15 @@ from mmact_ctrl.datasets.layout import IMAGES_PREFIX
 from mmact_ctrl.datasets.reader import LeRobotDataset
 from mmact_ctrl.sources.action_space import ActionSpace
 
+#: the names our exports give ``observation.state`` (joints + gripper opening) and each action space's ``action``
+#: (``scenarios.collect_lerobot`` writes them; a replay and a trained policy read them back)
+STATE_FEATURE_NAMES: tuple[str, ...] = tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",)
+TCP_ACTION_NAMES: tuple[str, ...] = ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad", "gripper_m")
+JOINT_ACTION_NAMES: tuple[str, ...] = STATE_FEATURE_NAMES
 #: the action names of the spaces our exports write -> the action space's kind
-ACTION_NAMES: dict[tuple[str, ...], str] = {
-    ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad", "gripper_m"): "tcp_pose",
-    tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",): "joint_pos",
-}
+ACTION_NAMES: dict[tuple[str, ...], str] = {TCP_ACTION_NAMES: "tcp_pose", JOINT_ACTION_NAMES: "joint_pos"}
 #: ``observation.state``'s names in our exports -> the ``Observation`` fields they are
-STATE_NAMES: dict[tuple[str, ...], tuple[str, ...]] = {
-    tuple(f"panda_joint{i}_rad" for i in range(1, 8)) + ("gripper_m",): ("q_rad", "gripper_m"),
-}
+STATE_NAMES: dict[tuple[str, ...], tuple[str, ...]] = {STATE_FEATURE_NAMES: ("q_rad", "gripper_m")}
 
 
 @dataclass(frozen=True)
