@@ -98,7 +98,7 @@ class EpisodeRunner(SourceQueries):
         state = world.reset(seed)
         if initial_dq_rad_s is not None:
             state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
-        tau_start = controller.reset(state.q_rad, state.dq_rad_s, state.gripper_m)
+        tau_start = controller.reset(state.q_rad, state.dq_rad_s, state.gripper_hold_m())
         self.monitor = SafetyMonitor(CommandLimits(dt_s=dt))
         self.monitor.reset(tau_start)
         self.contact = ContactForceMonitor(cfg.contact_force_limit_n)

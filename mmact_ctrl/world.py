@@ -20,6 +20,8 @@ class RobotState:
         ee_pos_m: measured TCP position (3,), world frame, m (for metrics; controllers use their own FK).
         wrench_ext: the external wrench on the robot at the TCP (6,): force N and torque N m, world frame (a real
             Panda reports it as ``O_F_ext_hat_K``); None where nothing can touch the robot (the reach scenes).
+        gripper_cmd_m: the opening the gripper is being driven to now, m (a gripper squeezing an object is driven
+            below its measured opening: holding the measured opening would let go); None where not reported.
     """
 
     t_s: float
@@ -28,6 +30,12 @@ class RobotState:
     gripper_m: float
     ee_pos_m: np.ndarray
     wrench_ext: np.ndarray | None = None
+    gripper_cmd_m: float | None = None
+
+    def gripper_hold_m(self) -> float:
+        """The gripper command that keeps the gripper as it is: its current command where reported, else the measured
+        opening, m."""
+        return self.gripper_m if self.gripper_cmd_m is None else self.gripper_cmd_m
 
 
 class World(Protocol):

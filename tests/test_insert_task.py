@@ -57,6 +57,57 @@ def test_the_success_predicate_on_hand_built_states():
     assert r["peg_slip_m"] == pytest.approx(0.003) and r["peak_contact_force_n"] == 12.0
 
 
+def _peg_in_finger_m(world) -> np.ndarray:
+    """The peg's centre in the left finger's frame, m."""
+    import mujoco
+
+    m, d = world.model, world.data
+    finger = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "panda_leftfinger")
+    peg = world.data.qpos[world._peg_q:world._peg_q + 3]
+    return d.xmat[finger].reshape(3, 3).T @ (peg - d.xpos[finger])
+
+
+def test_the_peg_does_not_slide_in_the_fingers_through_a_fast_arm_move():
+    # a 1 s minimum-jerk joint move (about 0.25 m of the TCP) under a joint PD with the gravity and Coriolis terms,
+    # the gripper squeezing: with MuJoCo's default contact stiffness the peg slid 3 mm along the fingers here
+    world = make_world("static", 0.0, task="insert", clearance_mm=1.0)
+    world.reset(0)
+    d = world.data
+    q0, dq_goal = d.qpos[:7].copy(), np.array([0.3, 0.4, 0.0, -0.4, 0.0, 0.3, 0.0])
+    for _ in range(50):  # the squeeze settles
+        world.step(d.qfrc_bias[:7] + 400.0 * (q0 - d.qpos[:7]) - 40.0 * d.qvel[:7], 0.0)
+    start, tcp_start = _peg_in_finger_m(world), world.state().ee_pos_m
+    for k in range(1500):
+        s = min(k * world.dt_s / 1.0, 1.0)
+        q_ref = q0 + (10 * s**3 - 15 * s**4 + 6 * s**5) * dq_goal
+        world.step(d.qfrc_bias[:7] + 400.0 * (q_ref - d.qpos[:7]) - 40.0 * d.qvel[:7], 0.0)
+    moved = np.linalg.norm(world.state().ee_pos_m - tcp_start)
+    slip = _peg_in_finger_m(world) - start
+    world.close()
+    assert moved > 0.15
+    assert np.linalg.norm(slip[[0, 2]]) < 0.001, slip  # along the finger's face (its y is the closing axis)
+
+
+def test_the_squeeze_on_the_peg_is_held_until_the_first_chunk():
+    # the controller holds the gripper's command, not its measured opening: holding the opening let go of the peg
+    # for the first chunk's 0.2 s (the fingers opened to the peg's faces, it dropped 2 mm)
+    world = make_world("static", 0.0, task="insert", clearance_mm=1.0)
+    state = world.reset(3)
+    assert state.gripper_cmd_m == 0.0 and state.gripper_hold_m() == 0.0 < state.gripper_m
+    reach = make_world("static", 0.0)
+    reach_state = reach.reset(3)
+    assert reach_state.gripper_cmd_m is None and reach_state.gripper_hold_m() == reach_state.gripper_m
+    reach.close()
+    source = make_expert(lead="velocity", world=world)
+    cfg = StackConfig(mode="hybrid", duration_s=0.25, **task_stack_settings("insert", False))  # the first chunk at 0.2 s
+    start = _peg_in_finger_m(world)
+    log = run_episode(world, source, HybridController(cfg), seed=3, record=True)
+    drop, cmd_m = _peg_in_finger_m(world) - start, world.gripper_command_m()
+    world.close()
+    assert len(log.t_s) >= 240 and cmd_m < 0.001
+    assert abs(drop[2]) < 0.0003, drop
+
+
 def _insert_episode(mode: str, seed: int, compliance: bool = False, noise_m: float = 0.002):
     world = make_world("static", 0.0, noise_m=noise_m, task="insert", clearance_mm=1.0)
     source = make_expert(lead="velocity", world=world)

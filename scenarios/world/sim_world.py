@@ -218,7 +218,13 @@ class SimWorld:
             gripper_m=float(d.qpos[self._finger_qpos].sum()),
             ee_pos_m=d.site_xpos[self._tcp].copy(),
             wrench_ext=self.measured_wrench(),
+            gripper_cmd_m=self.gripper_command_m(),
         )
+
+    def gripper_command_m(self) -> float | None:
+        """The opening the gripper is driven to, m, or None: reach's gripper holds nothing (a contact task's world
+        reports it: it may be squeezing an object from the reset on)."""
+        return None
 
     def measured_wrench(self) -> np.ndarray | None:
         """The external wrench on the robot at the TCP (6,), or None: reach's balls touch nothing (a contact task's

@@ -40,6 +40,10 @@ class ContactWorld(SimWorld):
             self._wrench_key = key
         return self._wrench.copy()
 
+    def gripper_command_m(self) -> float:
+        """The gripper's command after its slew, m (the insert task starts squeezing the peg: 0)."""
+        return self._gripper_cmd_m
+
     def step(self, tau_nm: np.ndarray, gripper_m: float) -> None:
         """One step; the gripper's command is slewed at ``grip.GRIPPER_SPEED_M_S`` (the Franka Hand's fingers move at
         most 0.1 m/s each: an unlimited servo slammed the pads onto a cube, a 37 N spike)."""

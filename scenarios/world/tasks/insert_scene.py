@@ -6,7 +6,8 @@ mouth: four long boxes turned 45 degrees about their axes, one along each inner 
 hole's edge. The fixture is a mocap body (moved kinematically by the episode's motion family: static, or slow at
 0.02-0.1 m/s; a contact with a mocap body lacks the relative-velocity term, which at these speeds is small: MuJoCo's
 docs); its geoms are rigid. The peg (a 2 cm square, 8 cm long, 50 g box) is a free body the fingers hold by friction
-(fingertip pads, ``grip``), its bottom ``PEG_BELOW_TCP_M`` under the TCP at the start.
+(fingertip pads, ``grip``), its bottom ``PEG_BELOW_TCP_M`` under the TCP at the start; the fingers' contacts are stiff
+(``grip.stiffen_fingers``) so that it stays there.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import mujoco
 
 from scenarios.world.panda_scene import SceneConfig
 from scenarios.world.tasks.grip import (ENV_CONAFFINITY, ENV_CONTYPE, OBJECT_CONAFFINITY, OBJECT_CONTYPE,
-                                        add_contact_settings, add_finger_pads)
+                                        add_contact_settings, add_finger_pads, stiffen_fingers)
 
 #: the peg: its side, length and mass; its bottom under the TCP when held
 PEG_SIDE_M = 0.02
@@ -45,6 +46,7 @@ def add_insert_scene(spec: mujoco.MjSpec, config: SceneConfig) -> None:
     """The fixture (walls, chamfer), the peg, the pads and the contact settings."""
     add_contact_settings(spec)
     add_finger_pads(spec)
+    stiffen_fingers(spec)  # the peg must not slide in the fingers on the way (``stiffen_fingers``)
     fixture = spec.worldbody.add_body(name=FIXTURE_BODY, mocap=True, pos=list(FIXTURE_START_M))
     _walls(fixture, hole_half_m(config.clearance_mm))
     peg = spec.worldbody.add_body(name=PEG_BODY, pos=[0.5, 0.3, PEG_LENGTH_M / 2])
