@@ -133,3 +133,52 @@ def test_bad_gains_are_refused_at_construction():
         TcpPositionTask(kp=-1.0)
     with pytest.raises(ValueError, match="tcp_vel_cap_m_s"):
         TcpPositionTask(tcp_vel_cap_m_s=0.0)
+
+
+def test_the_warm_general_solver_agrees_with_the_cold_one_and_takes_the_ladder(model):
+    from controllers.qp.warm import WarmProblemSolver
+
+    rng = np.random.default_rng(4)
+    qp = TaskSpaceQP(extra_tasks=(JointAccelTask(0, 1.0, 1e-3),))  # the general path
+    warm = WarmProblemSolver(eps=1e-9, max_iter=20000)
+    for _ in range(20):  # a run of ticks on one shape: the warm start carries over
+        q, dq, terms, ref = _instance(model, rng)
+        qp.reset(terms.h)
+        problem = build_problem(qp.tasks, qp.limits, qp.state(terms, q, dq, ref))
+        x_warm, x_cold = warm.solve(problem), solve_problem(problem, eps=1e-9, max_iter=20000)
+        assert x_warm is not None and x_cold is not None
+        np.testing.assert_allclose(terms.M @ x_warm, terms.M @ x_cold, atol=1e-3)  # N*m
+        assert np.all(problem.A @ x_warm >= problem.lower - 1e-6) and np.all(problem.A @ x_warm <= problem.upper + 1e-6)
+    # another shape (one more row) is set up anew; contradictory rows go down DAQP's ladder as the cold path does
+    hi = Constraint(np.eye(7)[:1], np.array([0.01]), np.array([np.inf]), 2)
+    lo = Constraint(np.eye(7)[:1], np.array([-np.inf]), np.array([-0.01]), 1)
+    problem = build_problem(qp.tasks, qp.limits + (_Fixed(hi), _Fixed(lo)), qp.state(terms, q, dq, ref))
+    x = warm.solve(problem)
+    assert x is not None and x[0] <= -0.01 + 1e-6
+
+
+def test_the_impedance_force_is_capped_with_the_references_acceleration_in_it(model):
+    from controllers.qp.impedance import ImpedanceTask
+
+    q, dq, terms, ref = _instance(model, np.random.default_rng(5))
+    task = ImpedanceTask(force_max_n=20.0)
+    jp = terms.J[:3]
+    lam = np.linalg.inv(jp @ np.linalg.solve(terms.M, jp.T))
+    # small: a_des = a_ref + Lambda^-1 f exactly (the cap does not bind)
+    at = TaskReference(terms.pos_m + np.array([0.0, 0.0, -0.002]), terms.vel[:3].copy(), np.array([0.0, 0.0, -0.5]),
+                       terms.rot, np.zeros(3), np.zeros(3), model.home_q_rad)
+    state = QPState(terms, q, dq, at, terms.h, np.zeros(7))
+    f_sd = task.spring_damper_n(state)
+    assert np.linalg.norm(lam @ at.acc_m_s2 + f_sd) < 20.0
+    np.testing.assert_allclose(task.desired_acc(state), at.acc_m_s2 + np.linalg.solve(lam, f_sd), atol=1e-9)
+    # a reference accelerating down at 20 m/s^2 with the TCP on it: the feed-forward alone is over the cap, and the
+    # force asked of the TCP is the cap, along the feed-forward (a held peg is not pushed with Lambda a_ref)
+    fast = TaskReference(terms.pos_m.copy(), terms.vel[:3].copy(), np.array([0.0, 0.0, -20.0]), terms.rot,
+                         np.zeros(3), np.zeros(3), model.home_q_rad)
+    state = QPState(terms, q, dq, fast, terms.h, np.zeros(7))
+    f = task.force_n(state)
+    ff = lam @ fast.acc_m_s2
+    assert np.linalg.norm(ff) > 20.0
+    assert np.linalg.norm(f) == pytest.approx(20.0)
+    np.testing.assert_allclose(f / 20.0, ff / np.linalg.norm(ff), atol=1e-9)
+    np.testing.assert_allclose(task.desired_acc(state), np.linalg.solve(lam, f), atol=1e-9)

@@ -4,9 +4,12 @@ reference, stiff or soft per axis of the tool frame, whose force is capped.
 Stiff tracking (``TcpPositionTask``: 400 1/s^2 on the error, saturated at 10 cm) asks the arm for whatever force
 closes the error: a waypoint quantized a few millimetres into a surface becomes a push of up to about 100 N. The
 impedance task asks for the acceleration that makes the TCP behave like a spring ``K`` (N/m, per tool axis) and a
-damper on the robot's own task-space inertia ``Lambda = (J M^-1 J')^-1``: ``a_des = a_ref + Lambda^-1 f`` with
-``f = sat(K e + D e_dot)``, the spring-damper's force clipped per tool axis at ``force_max_n``. Held still by a contact,
-the torque the QP sends (``M a_des + h``) makes the TCP push with ``f``: never more than the cap per axis,
+damper on the robot's own task-space inertia ``Lambda = (J M^-1 J')^-1``: ``a_des = Lambda^-1 f`` with
+``f = sat(Lambda a_ref + K e + D e_dot)``: the force that carries the reference's acceleration plus the spring-damper's,
+scaled down to ``force_max_n`` where its magnitude exceeds it (``a_ref + Lambda^-1 sat(K e + D e_dot)`` capped only
+the spring: a peg held on the chamfer while the hybrid layer's reference accelerated down was pushed with Lambda
+a_ref = 26 N more, 31.5 N in all). Held still by a contact, the torque the QP sends (``M a_des + h``) makes the TCP
+push with ``f``: never more than the cap,
 which is how the contact-force limit is kept in the QP. The damping is ``2 zeta sqrt(K m)`` for a nominal ``m``.
 It replaces the TCP position task (which the stack then weighs 0); orientation, posture and the limits are unchanged.
 """
@@ -25,7 +28,7 @@ from controllers.qp.tasks import tracking_cost
 class ImpedanceTask:
     """Attributes:
         stiffness_n_m: spring per tool axis (x, y across and along the fingers' closing, z the approach), N/m.
-        force_max_n: the spring-damper's force cap per tool axis, N (the contact-force limit kept in the QP).
+        force_max_n: the cap on the spring-damper's force magnitude, N (the contact-force limit kept in the QP).
         damping_ratio: zeta of the damper (1 = critical for ``nominal_mass_kg``).
         nominal_mass_kg: the apparent mass the damping is tuned for, kg.
         weight: cost per (m/s^2)^2.
@@ -46,23 +49,35 @@ class ImpedanceTask:
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"ImpedanceTask.{name} must be a finite number > 0, got {v!r}")
 
-    def force_n(self, state: QPState) -> np.ndarray:
-        """The spring-damper's force (3,) on the TCP, world frame, N."""
+    def spring_damper_n(self, state: QPState) -> np.ndarray:
+        """The spring-damper's force (3,) on the TCP, world frame, N (uncapped)."""
         terms, ref = state.terms, state.ref
         rot = terms.rot  # tool -> world
         k = np.asarray(self.stiffness_n_m, dtype=float)
         d = 2.0 * self.damping_ratio * np.sqrt(k * self.nominal_mass_kg)
         e_tool = rot.T @ (ref.pos_m - terms.pos_m)
         ev_tool = rot.T @ (ref.vel_m_s - terms.vel[:3])
-        f_tool = np.clip(k * e_tool + d * ev_tool, -self.force_max_n, self.force_max_n)
-        return rot @ f_tool
+        return rot @ (k * e_tool + d * ev_tool)
+
+    def force_n(self, state: QPState, lambda_inv: np.ndarray | None = None) -> np.ndarray:
+        """The force (3,) the TCP is asked to exert, world frame, N: the reference's acceleration carried by the task-
+        space inertia (``Lambda a_ref``) plus the spring-damper, its magnitude capped at ``force_max_n``."""
+        if lambda_inv is None:
+            lambda_inv = self._lambda_inv(state)
+        f = np.linalg.solve(lambda_inv, state.ref.acc_m_s2) + self.spring_damper_n(state)
+        norm = float(np.linalg.norm(f))
+        return f * (self.force_max_n / norm) if norm > self.force_max_n else f
+
+    @staticmethod
+    def _lambda_inv(state: QPState) -> np.ndarray:
+        """``Lambda^-1 = J M^-1 J'`` over the TCP's linear rows, (3, 3)."""
+        jp = state.terms.J[:3]
+        return jp @ np.linalg.solve(state.terms.M, jp.T)
 
     def desired_acc(self, state: QPState) -> np.ndarray:
-        """``a_ref + Lambda^-1 f``, m/s^2 (``Lambda^-1 = J M^-1 J'`` over the TCP's linear rows)."""
-        terms = state.terms
-        jp = terms.J[:3]
-        lambda_inv = jp @ np.linalg.solve(terms.M, jp.T)
-        return state.ref.acc_m_s2 + lambda_inv @ self.force_n(state)
+        """``Lambda^-1 sat(Lambda a_ref + f)``, m/s^2: ``a_ref + Lambda^-1 f`` wherever the cap does not bind."""
+        lambda_inv = self._lambda_inv(state)
+        return lambda_inv @ self.force_n(state, lambda_inv)
 
     def cost(self, state: QPState) -> Objective:
         t = state.terms

@@ -17,7 +17,9 @@ full sparsity pattern of P (dense upper triangle) and A (dense M block + identit
 updated, warm-started, assembled by one compiled kernel (``controllers.tick_kernels.assemble_qp``) straight into the
 CSC value arrays. :meth:`TaskSpaceQP.problem` is the same QP summed from the task objects in numpy (the reference the
 kernel is tested against). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
-limits=...)``): :func:`controllers.qp.solve.solve_problem` on the stacked problem.
+limits=...)``): the stacked problem (:func:`controllers.qp.solve.build_problem`) solved by OSQP kept warm across ticks
+(:class:`controllers.qp.warm.WarmProblemSolver`; ``solve_problem``, cold, gave the same within tolerance at ~1.1 ms a
+tick).
 
 If OSQP returns neither "solved" nor "solved inaccurate" (the latter counted in ``inaccurate``), or a non-finite
 solution, the same QP goes to DAQP (dual active set; counted in ``rescues`` when it solves it): ADMM can stall when the
@@ -40,7 +42,8 @@ import scipy.sparse as sp
 from controllers.limits import JointAccelerationBounds
 from controllers.qp.config import QPConfig
 from controllers.qp.limits import AccelerationJerkLimit, DefaultLimits, EffortRateLimit, ViabilityLimit
-from controllers.qp.solve import build_problem, daqp_ladder, soft_sense, solve_problem, stack_rows
+from controllers.qp.solve import build_problem, daqp_ladder, soft_sense, stack_rows
+from controllers.qp.warm import WarmProblemSolver
 from controllers.qp.state import Constraint, QPState, TaskReference
 from controllers.qp.tasks import PostureTask, RegularisationTask, TcpOrientationTask, TcpPositionTask
 from controllers.robot_description import JointLimits
@@ -108,6 +111,8 @@ class TaskSpaceQP:
         self._p_idx = np.flatnonzero(p_pattern.ravel(order="F"))
         self._P_x, self._g, self._A_x = np.empty(len(self._p_idx)), np.empty(n), np.empty(int(a_pattern.sum()))
         self._l, self._u = np.empty(2 * n), np.empty(2 * n)
+        #: the general path's solver (extra tasks or limits): OSQP kept warm on the stacked problem
+        self._general = WarmProblemSolver(config.solver.eps, config.solver.max_iter)
         self._setup_solver()
         self._P_dense = np.zeros((n, n))
         self._A_dense = np.vstack([np.zeros((n, n)), np.eye(n)])
@@ -132,7 +137,8 @@ class TaskSpaceQP:
         return solver
 
     def _setup_solver(self) -> None:
-        """(Re)build the OSQP problem: no warm start or adapted rho left."""
+        """(Re)build the OSQP problem: no warm start or adapted rho left (the general path's too)."""
+        self._general.reset()
         self._solver = self._new_solver()
         # The low-level solver object: the high-level wrapper's update()/solve() spend ~50 us per tick
         # in Python bookkeeping (derivative caches, info namespaces) that a 1 kHz loop does not need.
@@ -231,8 +237,7 @@ class TaskSpaceQP:
         if self.fast_path:
             ddq, ok = self._solve_fast(terms, q_rad, dq_rad_s, ref, tau)
         else:
-            ddq = solve_problem(build_problem(self.tasks, self.limits, self.state(terms, q_rad, dq_rad_s, ref)),
-                                self.config.solver.eps, self.config.solver.max_iter)
+            ddq = self._general.solve(build_problem(self.tasks, self.limits, self.state(terms, q_rad, dq_rad_s, ref)))
             ok = ddq is not None and torque(terms.M, terms.h, ddq, tau)
         if ok:
             if clamp_rate(tau, self.tau_last, self.dtau_hard_nm) > 1e-9:  # the solver's tolerance, rare
