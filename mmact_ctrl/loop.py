@@ -30,10 +30,12 @@ def run_episode(
     initial_dq_rad_s: np.ndarray | None = None,
     sensor: TargetSensor | None = None,
     record: bool = False,
+    lookahead: bool = True,
 ) -> EpisodeLog:
     """Run one episode of ``controller.config.duration_s`` and return its log (the arguments are
     :class:`~mmact_ctrl.runner.EpisodeRunner`'s)."""
     runner = EpisodeRunner(world, source, controller, seed, video_fps=video_fps, progress=progress, link=link,
-                           initial_dq_rad_s=initial_dq_rad_s, sensor=sensor, record=record)
+                           initial_dq_rad_s=initial_dq_rad_s, sensor=sensor, record=record,
+                           lookahead=lookahead)
     runner.advance()
     return runner.finish()

@@ -23,6 +23,9 @@ class PolicyChunkSource:
     """
 
     needs_image = True
+    #: ``plan`` reads only its observation (the network in eval mode, no sampling): simulated time runs it ahead
+    #: in a worker while the arm is simulated (``mmact_ctrl.lookahead``)
+    answers_concurrently = True
 
     def __init__(self, checkpoint: str | Path | None = None, action_steps: int = 1, device: str = "cpu",
                  refine_bins: int | None = None, torch_threads: int | None = 1) -> None:

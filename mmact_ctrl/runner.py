@@ -32,6 +32,7 @@ from mmact_ctrl.chunk_intake import ChunkIntake
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.episode_log import CommandLink, EpisodeLog
 from mmact_ctrl.frame_history import EarlierFrame
+from mmact_ctrl.lookahead import AheadQuery, LookaheadWorker, can_look_ahead
 from mmact_ctrl.perception import OracleSensor, TargetSensor
 from mmact_ctrl.runner_queries import FRAME_GAP_S, SOURCE_TIMING_KEYS, SourceQueries, observe
 from mmact_ctrl.sources.contract import require_capabilities
@@ -71,6 +72,8 @@ class EpisodeRunner(SourceQueries):
             (``EpisodeLog.after_us``), so ``tick_us`` is the command path as real time runs it in both.
         record: also keep what a recording shows (``EpisodeLog.recording``: the target estimate at 100 Hz, each
             activated chunk's waypoints, each MPC plan's TCP preview, the frames each query was answered from).
+        lookahead: simulated time: let the source's call run in a worker until its chunk is due, where nothing can
+            tell the difference (``mmact_ctrl.lookahead``; results unchanged bit for bit). False: always in line.
 
     The episode starts at construction (``world.reset(seed)``); a mode that needs what the source cannot do
     (``ChunkExecutor.needs``) is refused here, in one line, before any tick.
@@ -79,7 +82,8 @@ class EpisodeRunner(SourceQueries):
     def __init__(self, world: World, source: ChunkSource, controller: HybridController, seed: int,
                  video_fps: float = 0.0, progress=None, link: CommandLink | None = None,
                  initial_dq_rad_s: np.ndarray | None = None, sensor: TargetSensor | None = None,
-                 pause_at_queries: bool = False, async_queries=None, deadline=None, record: bool = False) -> None:
+                 pause_at_queries: bool = False, async_queries=None, deadline=None, record: bool = False,
+                 lookahead: bool = True) -> None:
         cfg = controller.config
         self.world, self.source, self.controller, self.config = world, source, controller, cfg
         self.spec = SourceSpec.of(source)  # what the source declares, read once
@@ -95,6 +99,12 @@ class EpisodeRunner(SourceQueries):
         self.order = make_order(deadline)
         controller.defer_mpc_updates(self.order.defers_mpc)
         self._inflight: tuple[float, float] | None = None  # async: (query time, next query time it replaced)
+        # simulated time: the source's call runs ahead in a worker where nothing can tell (``mmact_ctrl.lookahead``)
+        ahead = lookahead and async_queries is None and can_look_ahead(
+            self.spec.answers_concurrently, cfg.latency_ms / 1000.0, 1.0 / cfg.replan_hz, self.spec.prev_frame_gap_s,
+            dt, cfg.measured_latency, self.pause_at_queries)
+        self.lookahead = LookaheadWorker() if ahead else None
+        self._ahead: AheadQuery | None = None
         state = world.reset(seed)
         if initial_dq_rad_s is not None:
             state = world.set_arm_state(state.q_rad, initial_dq_rad_s)
@@ -211,6 +221,8 @@ class EpisodeRunner(SourceQueries):
         self._after_us = self.order.on_arrival(self, arrived, tick0) if arrived else 0.0
         if self.async_queries is not None:
             self._collect(t)
+        elif self._ahead is not None and self._ahead_due(t):
+            self._take_ahead()
         self.earlier.tick(t, self.next_plan_s, self.replan_period_s)
         if t >= self.next_plan_s - self._eps:  # a query is due
             if self.async_queries is not None:
@@ -311,6 +323,12 @@ class EpisodeRunner(SourceQueries):
         if self._finished is not None:
             return self._finished
         log, cfg, world = self.log, self.config, self.world
+        if self._ahead is not None:  # asked ahead near the end: its answer is handled as it was in line
+            w0 = time.perf_counter()
+            self._take_ahead()
+            self._wall_s += time.perf_counter() - w0
+        if self.lookahead is not None:
+            self.lookahead.close()
         log.wall_s = self._wall_s
         if self.k < self.n_ticks:
             log.truncate(self.k)

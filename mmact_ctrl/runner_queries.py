@@ -1,5 +1,6 @@
-"""The runner's source side: building what a chunk source sees, asking it (in this process, or in real time in a
-worker while the ticks go on), and queuing what it answers to become active after its latency.
+"""The runner's source side: building what a chunk source sees, asking it (in this process; in simulated time, where
+nothing can tell, in a worker until its chunk is due, ``mmact_ctrl.lookahead``; in real time in a worker while the
+ticks go on), and queuing what it answers to become active after its latency.
 
 :class:`SourceQueries` is a part of :class:`~mmact_ctrl.runner.EpisodeRunner` (it reads the runner's world, source,
 controller, executor, intake and log); it is kept apart because it is the one half of the loop a newcomer reads
@@ -15,6 +16,7 @@ import numpy as np
 
 from mmact_ctrl.chunk import ActionChunk, Observation
 from mmact_ctrl.executors import QueryContext
+from mmact_ctrl.lookahead import AheadQuery
 
 #: the earlier frame a chunk source is shown beside the current one (``Observation.target_prev_pos_m``), s
 FRAME_GAP_S = 0.1
@@ -73,6 +75,11 @@ class SourceQueries:
         intake, active = self.intake, self.controller.active
         return intake.pending[-1].chunk if intake.pending else (active.chunk if active else None)
 
+    def _context(self, t_s: float) -> QueryContext:
+        """What the executor's request reads of the loop at a query at ``t_s`` (simulated time's latency)."""
+        return QueryContext(t_s=t_s, latency_s=self.latency_s, scheduled=self._scheduled(),
+                            chunk_dt_s=self.spec.chunk_dt_s)
+
     def asked_at(self, t_s: float) -> bool:
         """Real time: whether the tick at ``t_s`` handed the worker a query (its share of work is had)."""
         return self._inflight is not None and self._inflight[0] == t_s
@@ -111,8 +118,11 @@ class SourceQueries:
 
     def _query(self, obs: Observation) -> None:
         """Ask the source (through the executor and the intake) and queue what it answers."""
+        if self.lookahead is not None:
+            self._ask_ahead(obs)
+            return
         t, log, intake = obs.t0_s, self.log, self.intake
-        ctx = QueryContext(t_s=t, latency_s=self.latency_s, scheduled=self._scheduled(), chunk_dt_s=self.spec.chunk_dt_s)
+        ctx = self._context(t)
         executor, source = self.executor, self.source
         p0 = time.perf_counter()
         # the request is built inside the intake's guard too: what it reads of the source (its chunk_dt_s for an
@@ -126,9 +136,44 @@ class SourceQueries:
             self.accept(chunk, obs, delay_s)
         self.next_plan_s = self.executor.after_request(t, chunk, self.next_plan_s, self.replan_period_s)
 
-    def accept(self, chunk: ActionChunk, obs: Observation, delay_s: float) -> None:
+    # ---- simulated time, asked ahead (``mmact_ctrl.lookahead``) ---------------------------------------------------
+    def _ask_ahead(self, obs: Observation) -> None:
+        """Hand the call to the worker at ``t0``, with what the answer's handling reads of ``t0`` (the target
+        estimate, the next query time); no other query until :meth:`_take_ahead`."""
+        t = obs.t0_s
+        ctx = self._context(t)
+        executor, source = self.executor, self.source
+        reply = self.lookahead.submit(lambda: executor.request(source, obs, ctx)())
+        self._ahead = AheadQuery(obs, self.controller.target_estimate(t), self.next_plan_s, t + self.latency_s, reply)
+        self.next_plan_s = math.inf
+
+    def _ahead_due(self, t: float) -> bool:
+        """Whether the answer in flight is needed by tick ``t``: its chunk's activation, or any chunk's admission
+        (an admission may move the next query's time, which the answer's handling sets)."""
+        q = self._ahead
+        if q is None:
+            return False
+        pending = self.intake.pending
+        return t >= q.needed_at_s - self._eps or (bool(pending) and pending[0].t_active_s <= t + self._eps)
+
+    def _take_ahead(self) -> None:
+        """The answer in flight (waited for if it has not come), handled as :meth:`_query` handles one at ``t0``."""
+        q, self._ahead = self._ahead, None
+        reply, obs = q.reply.result(), q.observation
+        chunk = self.intake.request(reply.result, obs)
+        self.log.plan_ms.append(reply.call_s * 1e3)
+        if self.record and obs.image is not None:
+            self.log.recording["frames"].append((obs.t0_s, obs.image))
+        if chunk is not None:
+            self.accept(chunk, obs, self.latency_s, q.target_at_obs_m)
+        self.next_plan_s = self.executor.after_request(obs.t0_s, chunk, q.next_before_s, self.replan_period_s)
+
+    _UNSET = object()
+
+    def accept(self, chunk: ActionChunk, obs: Observation, delay_s: float, target_at_obs_m=_UNSET) -> None:
         """Queue a valid ``chunk`` (answered to ``obs``) to become active ``delay_s`` after its observation (or later,
-        when the source says it is late: ``info["arrival_delay_s"]``)."""
+        when the source says it is late: ``info["arrival_delay_s"]``); ``target_at_obs_m``: the target estimate at
+        the observation's time (default: the estimate now, predicted to it)."""
         log = self.log
         n_clipped = chunk.n_clipped
         log.clipped_actions += int(n_clipped) if isinstance(n_clipped, (int, np.integer)) and n_clipped > 0 else 0
@@ -138,4 +183,6 @@ class SourceQueries:
             if value is not None:
                 log.source_timing_ms.setdefault(key, []).append(value)
         delay_s = max(delay_s, _finite(info.get("arrival_delay_s")) or 0.0)  # a source that knows it is late
-        self.intake.submit(obs.t0_s + delay_s, chunk, self.controller.target_estimate(obs.t0_s), obs.ee_pos_m)
+        if target_at_obs_m is SourceQueries._UNSET:
+            target_at_obs_m = self.controller.target_estimate(obs.t0_s)
+        self.intake.submit(obs.t0_s + delay_s, chunk, target_at_obs_m, obs.ee_pos_m)

@@ -135,8 +135,9 @@ def _episode_runner(args: argparse.Namespace, world, source, controller, sensor,
         from scenarios.world.viewer import run_with_viewer
 
         return lambda seed, record, fps: run_with_viewer(world, source, controller, seed, sensor=sensor, record=record)
+    lookahead = not getattr(args, "no_lookahead", False)
     return lambda seed, record, fps: run_episode(world, source, controller, seed=seed, video_fps=fps, sensor=sensor,
-                                                 record=record)
+                                                 record=record, lookahead=lookahead)
 
 
 def run(args: argparse.Namespace) -> dict:

@@ -289,6 +289,10 @@ def _output_args(p: argparse.ArgumentParser) -> None:
 def _realtime_args(p: argparse.ArgumentParser) -> None:
     """Real time: the wall clock, the MPC's phase, the QP's cap, the loop's priority."""
     r = p.add_argument_group("real time")
+    r.add_argument("--no-lookahead", action="store_true",
+                   help="simulated time: call the chunk source in line, the loop waiting for it (by default a source "
+                        "that declares its plan pure, as the shipped policy does, is called in a worker thread while "
+                        "the ticks before its chunk's activation run: the same results bit for bit, sooner)")
     r.add_argument("--realtime", action="store_true",
                    help="run physics and control paced to the wall clock at 1 kHz, the chunk source computing in its "
                         "own process meanwhile (a ws:// source as it is; policy, expert or module:factory started by "

@@ -32,6 +32,9 @@ class SourceSpec:
         action_token_range: the half-open range of the action tokens its chunks carry (None: no tokens).
         capabilities: the optional capabilities it provides (``inpaint``).
         scene: the ``make_world`` settings of the scenes it was made for (``plane_z_m``, ``n_objects``).
+        answers_concurrently: its ``plan`` (and ``plan_inpaint``) is a pure function of the observation, safe to call
+            from another thread while the world steps: simulated time may run it ahead (``mmact_ctrl.lookahead``).
+            Read from the source's class, never through a wrapper's delegation: a wrapper may add what is not.
     """
 
     name: str
@@ -43,6 +46,7 @@ class SourceSpec:
     action_token_range: tuple[int, int] | None = None
     capabilities: frozenset[str] = frozenset()
     scene: dict = field(default_factory=dict)
+    answers_concurrently: bool = False
 
     @classmethod
     def of(cls, source) -> "SourceSpec":
@@ -54,4 +58,5 @@ class SourceSpec:
                    prev_frame_gap_s=_float_or(get("prev_frame_gap_s") or 0.0, 0.0),
                    chunk_dt_s=dt,
                    action_token_range=None if tok is None else tok, capabilities=capabilities(source),
-                   scene=dict(get("scene") or {}))
+                   scene=dict(get("scene") or {}),
+                   answers_concurrently=getattr(type(source), "answers_concurrently", False) is True)
