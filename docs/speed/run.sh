@@ -1,11 +1,15 @@
 #!/bin/bash
-# Issue 33's figures (2026-12-04, the quiet 2-core machine, nothing else running; mink from `pip install -e '.[bench]'`)
+# Issue 33's figures (2026-12-04; the floor and the look-ahead rerun 2026-12-05; the quiet 2-core machine, nothing else running; mink from `pip install -e '.[bench]'`)
 set -e
 # the floor beside our tick and mink's solve_ik, on the main job's episode (our policy) and on the expert's
 python -m mmact_ctrl.bench --floor --json floor_policy.json > floor_policy.txt
 python -m mmact_ctrl.bench --floor --floor-args "--source expert" --json floor_expert.json > floor_expert.txt
 # the main job's real-time factor as the issue measured it
 python -m scenarios.moving_target --mode hybrid --target linear --episodes 3 --seed 3 --json out/main_job.json
+# the policy's call in a worker (mmact_ctrl.lookahead, 2026-12-05) against in line: twice in a row, same results
+for i in 1 2; do for f in --no-lookahead ""; do
+  python -m scenarios.moving_target --mode hybrid --target linear --episodes 4 --seed 3 --quiet $f --json out/main_job$f.json
+done; done
 # the sweep's scaling: 75 episodes with 1 and with 2 workers (wall time; results identical)
 /usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep1 --workers 1 --quiet
 /usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep2 --workers 2 --quiet
