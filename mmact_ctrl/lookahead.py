@@ -27,6 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mmact_ctrl.chunk import Observation
+from mmact_ctrl.realtime.async_source import Answer
 
 
 def can_look_ahead(answers_concurrently: bool, latency_s: float, period_s: float, prev_frame_gap_s: float,
@@ -37,30 +38,14 @@ def can_look_ahead(answers_concurrently: bool, latency_s: float, period_s: float
 
 
 @dataclass(frozen=True)
-class Reply:
-    """What the worker brings back: the call's value or what it raised, and its wall time, s."""
-
-    value: Any
-    error: BaseException | None
-    call_s: float
-
-    def result(self):
-        """The value, or raise what the call raised (inside the chunk intake's guard, which counts it)."""
-        if self.error is not None:
-            raise self.error
-        return self.value
-
-
-@dataclass(frozen=True)
 class AheadQuery:
-    """A query in flight: its observation, what the sync path would have read at ``t0`` (the target estimate, the
-    next query time it replaced), when its answer is needed, and the reply to come."""
+    """A query in flight: what the in-line path would have read at ``t0`` (the target estimate, the next query time it
+    replaced), when its answer is needed, and the answer to come (its observation in it)."""
 
-    observation: Observation
     target_at_obs_m: np.ndarray | None
     next_before_s: float
     needed_at_s: float
-    reply: Future
+    answer: Future
 
 
 class LookaheadWorker:
@@ -69,10 +54,12 @@ class LookaheadWorker:
     def __init__(self) -> None:
         self._pool: ThreadPoolExecutor | None = None
 
-    def submit(self, call: Callable[[], Any]) -> Future:
+    def submit(self, observation: Observation, call: Callable[[], Any]) -> Future:
+        """Run ``call`` (the request for ``observation``) in the worker; the future's result is its
+        :class:`~mmact_ctrl.realtime.async_source.Answer` (the value or what it raised, and its wall time)."""
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="chunk-source-ahead")
-        return self._pool.submit(_timed, call)
+        return self._pool.submit(_answer, observation, call)
 
     def close(self) -> None:
         if self._pool is not None:
@@ -80,10 +67,10 @@ class LookaheadWorker:
             self._pool = None
 
 
-def _timed(call: Callable[[], Any]) -> Reply:
+def _answer(observation: Observation, call: Callable[[], Any]) -> Answer:
     t0 = time.perf_counter()
     try:
         value, error = call(), None
     except BaseException as exc:  # noqa: BLE001 - every failure of the source is the intake's to count
         value, error = None, exc
-    return Reply(value, error, time.perf_counter() - t0)
+    return Answer(observation, value, error, time.perf_counter() - t0)

@@ -113,7 +113,7 @@ class SourceQueries:
         if self.record and obs.image is not None:
             self.log.recording["frames"].append((obs.t0_s, obs.image))
         if chunk is not None:
-            self.accept(chunk, obs, t - obs.t0_s)
+            self.accept(chunk, obs, t - obs.t0_s, self.controller.target_estimate(obs.t0_s))
         self.next_plan_s = self.executor.after_request(t_query, chunk, next_before, self.replan_period_s)
 
     def _query(self, obs: Observation) -> None:
@@ -133,7 +133,7 @@ class SourceQueries:
             log.recording["frames"].append((t, obs.image))
         if chunk is not None:
             delay_s = log.plan_ms[-1] / 1e3 if self.config.measured_latency else self.latency_s
-            self.accept(chunk, obs, delay_s)
+            self.accept(chunk, obs, delay_s, self.controller.target_estimate(t))
         self.next_plan_s = self.executor.after_request(t, chunk, self.next_plan_s, self.replan_period_s)
 
     # ---- simulated time, asked ahead (``mmact_ctrl.lookahead``) ---------------------------------------------------
@@ -143,8 +143,8 @@ class SourceQueries:
         t = obs.t0_s
         ctx = self._context(t)
         executor, source = self.executor, self.source
-        reply = self.lookahead.submit(lambda: executor.request(source, obs, ctx)())
-        self._ahead = AheadQuery(obs, self.controller.target_estimate(t), self.next_plan_s, t + self.latency_s, reply)
+        answer = self.lookahead.submit(obs, lambda: executor.request(source, obs, ctx)())
+        self._ahead = AheadQuery(self.controller.target_estimate(t), self.next_plan_s, t + self.latency_s, answer)
         self.next_plan_s = math.inf
 
     def _ahead_due(self, t: float) -> bool:
@@ -159,21 +159,21 @@ class SourceQueries:
     def _take_ahead(self) -> None:
         """The answer in flight (waited for if it has not come), handled as :meth:`_query` handles one at ``t0``."""
         q, self._ahead = self._ahead, None
-        reply, obs = q.reply.result(), q.observation
-        chunk = self.intake.request(reply.result, obs)
-        self.log.plan_ms.append(reply.call_s * 1e3)
+        answer = q.answer.result()
+        obs = answer.observation
+        chunk = self.intake.request(answer.result, obs)
+        self.log.plan_ms.append(answer.round_trip_s * 1e3)
         if self.record and obs.image is not None:
             self.log.recording["frames"].append((obs.t0_s, obs.image))
         if chunk is not None:
             self.accept(chunk, obs, self.latency_s, q.target_at_obs_m)
         self.next_plan_s = self.executor.after_request(obs.t0_s, chunk, q.next_before_s, self.replan_period_s)
 
-    _UNSET = object()
-
-    def accept(self, chunk: ActionChunk, obs: Observation, delay_s: float, target_at_obs_m=_UNSET) -> None:
+    def accept(self, chunk: ActionChunk, obs: Observation, delay_s: float,
+               target_at_obs_m: np.ndarray | None) -> None:
         """Queue a valid ``chunk`` (answered to ``obs``) to become active ``delay_s`` after its observation (or later,
         when the source says it is late: ``info["arrival_delay_s"]``); ``target_at_obs_m``: the target estimate at
-        the observation's time (default: the estimate now, predicted to it)."""
+        the observation's time (None before the first measurement)."""
         log = self.log
         n_clipped = chunk.n_clipped
         log.clipped_actions += int(n_clipped) if isinstance(n_clipped, (int, np.integer)) and n_clipped > 0 else 0
@@ -183,6 +183,4 @@ class SourceQueries:
             if value is not None:
                 log.source_timing_ms.setdefault(key, []).append(value)
         delay_s = max(delay_s, _finite(info.get("arrival_delay_s")) or 0.0)  # a source that knows it is late
-        if target_at_obs_m is SourceQueries._UNSET:
-            target_at_obs_m = self.controller.target_estimate(obs.t0_s)
         self.intake.submit(obs.t0_s + delay_s, chunk, target_at_obs_m, obs.ee_pos_m)

@@ -96,8 +96,12 @@ def solve_problem(problem: Problem, eps: float = 1e-5, max_iter: int = 400) -> n
     """The joint accelerations that solve ``problem``: OSQP, else DAQP down the ladder of relaxations; None when
     no level solves it."""
     x = _osqp(problem, eps, max_iter)
-    if x is not None:
-        return x
+    return x if x is not None else daqp_fallback(problem)
+
+
+def daqp_fallback(problem: Problem) -> np.ndarray | None:
+    """``problem`` solved by DAQP down the ladder of relaxations (where OSQP did not solve it); None when no level
+    solves it."""
     levels = ((problem.A, problem.upper, problem.lower,
                np.zeros(len(problem.lower), dtype=c_int) if k is None else soft_sense(problem.priority, k))
               for k in relaxation_levels(problem.priority))

@@ -37,13 +37,12 @@ from ctypes import c_int
 
 import numpy as np
 import osqp
-import scipy.sparse as sp
 
 from controllers.limits import JointAccelerationBounds
 from controllers.qp.config import QPConfig
 from controllers.qp.limits import AccelerationJerkLimit, DefaultLimits, EffortRateLimit, ViabilityLimit
 from controllers.qp.solve import build_problem, daqp_ladder, soft_sense, stack_rows
-from controllers.qp.warm import WarmProblemSolver
+from controllers.qp.warm import WarmProblemSolver, new_osqp
 from controllers.qp.state import Constraint, QPState, TaskReference
 from controllers.qp.tasks import PostureTask, RegularisationTask, TcpOrientationTask, TcpPositionTask
 from controllers.robot_description import JointLimits
@@ -128,13 +127,8 @@ class TaskSpaceQP:
 
     def _new_solver(self) -> osqp.OSQP:
         """An OSQP problem set up on the fixed sparsity patterns (~0.3 ms), with this QP's settings."""
-        n, s = self.n, self.config.solver
-        solver = osqp.OSQP()
-        solver.setup(P=sp.csc_matrix(self._p_pattern), q=np.zeros(n), A=sp.csc_matrix(self._a_pattern),
-                     l=-np.ones(2 * n), u=np.ones(2 * n), verbose=False, warm_starting=True, polishing=False,
-                     eps_abs=s.eps, eps_rel=s.eps, max_iter=s.max_iter, check_termination=5,
-                     adaptive_rho_interval=25)  # a fixed interval keeps runs deterministic (0 = by setup time)
-        return solver
+        s = self.config.solver
+        return new_osqp(self._p_pattern, self._a_pattern, s.eps, s.max_iter)
 
     def _setup_solver(self) -> None:
         """(Re)build the OSQP problem: no warm start or adapted rho left (the general path's too)."""

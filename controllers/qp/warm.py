@@ -11,13 +11,23 @@ agree with the cold path's within the solver's tolerance, not bit for bit (the i
 
 from __future__ import annotations
 
-from ctypes import c_int
-
 import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controllers.qp.solve import Problem, daqp_ladder, relaxation_levels, soft_sense
+from controllers.qp.solve import Problem, daqp_fallback
+
+
+def new_osqp(p_pattern: np.ndarray, a_pattern: np.ndarray, eps: float, max_iter: int) -> osqp.OSQP:
+    """An OSQP problem set up on fixed sparsity patterns (every entry of ``p_pattern``'s upper triangle and of
+    ``a_pattern`` stored), with the settings of every QP of the tick: warm starts, no polishing, and a fixed rho
+    interval, which keeps runs deterministic (0 = by setup time)."""
+    n, m = p_pattern.shape[0], a_pattern.shape[0]
+    solver = osqp.OSQP()
+    solver.setup(P=sp.csc_matrix(p_pattern), q=np.zeros(n), A=sp.csc_matrix(a_pattern), l=-np.ones(m),
+                 u=np.ones(m), verbose=False, warm_starting=True, polishing=False, eps_abs=eps, eps_rel=eps,
+                 max_iter=max_iter, check_termination=5, adaptive_rho_interval=25)
+    return solver
 
 
 class WarmProblemSolver:
@@ -42,11 +52,8 @@ class WarmProblemSolver:
     def _setup(self, n: int, m: int) -> None:
         p_pattern = np.triu(np.ones((n, n)))
         self._p_idx = np.flatnonzero(p_pattern.ravel(order="F"))  # P's upper triangle, column-major
-        solver = osqp.OSQP()
-        solver.setup(P=sp.csc_matrix(p_pattern), q=np.zeros(n), A=sp.csc_matrix(np.ones((m, n))), l=-np.ones(m),
-                     u=np.ones(m), verbose=False, warm_starting=True, polishing=False, eps_abs=self.eps,
-                     eps_rel=self.eps, max_iter=self.max_iter, check_termination=5, adaptive_rho_interval=25)
-        self._ext = solver._solver  # the low-level object: the wrapper's bookkeeping is not needed per tick
+        # the low-level object: the wrapper's bookkeeping is not needed per tick
+        self._ext = new_osqp(p_pattern, np.ones((m, n)), self.eps, self.max_iter)._solver
         self._shape = (n, m)
 
     def solve(self, problem: Problem) -> np.ndarray | None:
@@ -64,7 +71,4 @@ class WarmProblemSolver:
         x = np.array(ext.solution.x, dtype=np.float64)
         if int(ext.info.status_val) in self._ok and x.shape == (n,) and np.all(np.isfinite(x)):
             return x
-        levels = ((problem.A, problem.upper, problem.lower,
-                   np.zeros(m, dtype=c_int) if k is None else soft_sense(problem.priority, k))
-                  for k in relaxation_levels(problem.priority))
-        return daqp_ladder(problem.P, problem.g, levels)
+        return daqp_fallback(problem)
