@@ -105,16 +105,22 @@ class SourceQueries:
         answer = self.async_queries.poll()
         if answer is None:
             return
-        t_query, next_before = self._inflight
+        _, next_before = self._inflight
         self._inflight = None
+        t0 = answer.observation.t0_s
+        self._handle(answer, next_before, t - t0, self.controller.target_estimate(t0))
+
+    def _handle(self, answer, next_before_s: float, delay_s: float, target_at_obs_m: np.ndarray | None) -> None:
+        """A worker's answer (``Answer``) handled as one in line: checked and counted by the intake, its chunk
+        queued ``delay_s`` after its observation, the next query set from the one it replaced."""
         obs = answer.observation
         chunk = self.intake.request(answer.result, obs)
         self.log.plan_ms.append(answer.round_trip_s * 1e3)
         if self.record and obs.image is not None:
             self.log.recording["frames"].append((obs.t0_s, obs.image))
         if chunk is not None:
-            self.accept(chunk, obs, t - obs.t0_s, self.controller.target_estimate(obs.t0_s))
-        self.next_plan_s = self.executor.after_request(t_query, chunk, next_before, self.replan_period_s)
+            self.accept(chunk, obs, delay_s, target_at_obs_m)
+        self.next_plan_s = self.executor.after_request(obs.t0_s, chunk, next_before_s, self.replan_period_s)
 
     def _query(self, obs: Observation) -> None:
         """Ask the source (through the executor and the intake) and queue what it answers."""
@@ -159,15 +165,7 @@ class SourceQueries:
     def _take_ahead(self) -> None:
         """The answer in flight (waited for if it has not come), handled as :meth:`_query` handles one at ``t0``."""
         q, self._ahead = self._ahead, None
-        answer = q.answer.result()
-        obs = answer.observation
-        chunk = self.intake.request(answer.result, obs)
-        self.log.plan_ms.append(answer.round_trip_s * 1e3)
-        if self.record and obs.image is not None:
-            self.log.recording["frames"].append((obs.t0_s, obs.image))
-        if chunk is not None:
-            self.accept(chunk, obs, self.latency_s, q.target_at_obs_m)
-        self.next_plan_s = self.executor.after_request(obs.t0_s, chunk, q.next_before_s, self.replan_period_s)
+        self._handle(q.answer.result(), q.next_before_s, self.latency_s, q.target_at_obs_m)
 
     def accept(self, chunk: ActionChunk, obs: Observation, delay_s: float,
                target_at_obs_m: np.ndarray | None) -> None:
