@@ -307,6 +307,25 @@ def sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out
 
 
 @njit(cache=True, nogil=True)
+def sample_plan_blend(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, old_t0_s, old_dt_s, old_q_knots,
+                      old_dq_knots, old_ddq, old_ee_pos0, old_jl, blend_s, q_out, task_out):
+    """The hand-over of ``PlanTracker._sample`` in one call: the new plan and the old one sampled at ``t_s``
+    (:func:`sample_plan_task`), the old blended into the new with the smoothstep of ``(t_s - t0_s) / blend_s``:
+    ``out = old + w (new - old)``, into ``q_out`` (7,) and ``task_out`` (3, 3)."""
+    sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out, task_out)
+    q_old = np.empty(q_out.shape[0])
+    task_old = np.empty((3, 3))
+    sample_plan_task(t_s, old_t0_s, old_dt_s, old_q_knots, old_dq_knots, old_ddq, old_ee_pos0, old_jl, q_old, task_old)
+    x = (t_s - t0_s) / blend_s
+    w = x * x * (3.0 - 2.0 * x)
+    for r in range(3):
+        for c in range(3):
+            task_out[r, c] = task_old[r, c] + w * (task_out[r, c] - task_old[r, c])
+    for i in range(q_out.shape[0]):
+        q_out[i] = q_old[i] + w * (q_out[i] - q_old[i])
+
+
+@njit(cache=True, nogil=True)
 def absorb_jump(offset, offset_vel, offset_acc, ref, ref_vel, prev_ref, prev_vel, dt_s, pass_pos, pass_vel,
                 new_offset, new_offset_vel):
     """Relative Ruckig smoothing (``controllers.smoother``): the offset after absorbing this step's jump of

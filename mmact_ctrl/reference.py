@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -46,8 +47,9 @@ class ChunkReference:
         is still moving at its end follows a moving target's predicted course (or has not finished its approach)."""
         return tail_speed_m_s(self.chunk) < REST_SPEED_M_S
 
-    @property
+    @cached_property
     def t_last_s(self) -> float:
+        """The time of the chunk's last waypoint, s (read every tick by the watchdog; the chunk is immutable)."""
         return float(self.chunk.times_s[-1])
 
     def sample(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:

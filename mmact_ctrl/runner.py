@@ -268,9 +268,10 @@ class EpisodeRunner(SourceQueries):
         k, log, controller, cfg = self.k, self.log, self.controller, self.config
         t = k * self.dt_s
         state = self._state
+        # simulated time admits here, real time after the command: kept off the command path's time as real time
+        # runs it (the clock starts once it is done), recorded in after_us
+        admit_us = self.order.before_command(self, t)
         tick0 = time.perf_counter()
-        admit_us = self.order.before_command(self, t)  # simulated time admits here; real time after the command
-        tick0 += admit_us * 1e-6  # kept off the command path's time as real time runs it, recorded in after_us
         self._after_us += admit_us
         if controller.stop is None and (not controller.covered(t) or t - self.last_arrival_s > cfg.chunk_timeout_s):
             controller.watchdog(t)

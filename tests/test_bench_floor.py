@@ -44,5 +44,8 @@ def test_the_report_holds_the_tick_against_the_sum_of_the_bare_calls(recording):
     assert r["command_floor_us"] == pytest.approx(floor)
     assert r["episode_floor_us"] == pytest.approx(floor + r["calls"]["mj_step"]["median_us"])
     assert r["tick_median_over_floor"] == pytest.approx(r["tick"]["median_us"] / floor)
+    per_tick = r["command_floor_per_tick"]  # summed tick by tick: never under the cheapest tick's calls
+    assert per_tick["n"] == len(recording.q_rad) and per_tick["p99_us"] >= per_tick["median_us"] > 0
+    assert r["tick_p99_over_floor_p99"] == pytest.approx(r["tick"]["p99_us"] / per_tick["p99_us"])
     text = format_floor(r)
     assert "tick median / floor" in text and "real-time factor" in text

@@ -9,7 +9,8 @@ import pytest
 from controllers.mpc import MPCPlan
 from controllers.qp_id import QPConfig, TaskReference, TaskSpaceQP
 from controllers.robot_model import PandaModel
-from controllers.tick_kernels import accel_bounds, assemble_qp, log3, sample_plan_task
+from controllers.mpc.double_integrator import rollout
+from controllers.tick_kernels import accel_bounds, assemble_qp, log3, sample_plan_blend, sample_plan_task
 
 
 @pytest.fixture(scope="module")
@@ -103,6 +104,48 @@ def test_plan_sample_kernel_matches_mpc_plan():
         np.testing.assert_allclose(q_out, plan.sample(t)[0], atol=1e-12)
         for row, ref in zip(task, plan.sample_task(t)):
             np.testing.assert_allclose(row, ref, atol=1e-12)
+
+
+def _random_plan(rng, t0_s, n=20, dt=0.02):
+    ddq = rng.normal(0, 2, (n, 7))
+    q, dq = np.zeros((n + 1, 7)), np.zeros((n + 1, 7))
+    q[0], dq[0] = rng.normal(0, 0.5, 7), rng.normal(0, 0.3, 7)
+    for k in range(n):
+        q[k + 1] = q[k] + dq[k] * dt + 0.5 * ddq[k] * dt * dt
+        dq[k + 1] = dq[k] + ddq[k] * dt
+    return MPCPlan(t0_s, dt, q, dq, ddq, rng.normal(0.4, 0.1, (n + 1, 3)), True, 0.0, rng.normal(0, 0.5, (3, 7)))
+
+
+def test_plan_blend_kernel_equals_the_numpy_hand_over_bit_for_bit():
+    """The hand-over (PlanTracker._sample) was two samples and a smoothstep in numpy; the kernel gives the same bits."""
+    rng = np.random.default_rng(5)
+    old, new, blend_s = _random_plan(rng, 0.98), _random_plan(rng, 1.0), 0.02
+    for t in np.concatenate([[1.0, 1.005, 1.0199999], rng.uniform(1.0, 1.02, 60)]):
+        q_new, task_new, q_old, task_old = np.empty(7), np.empty((3, 3)), np.empty(7), np.empty((3, 3))
+        for plan, qo, to in ((new, q_new, task_new), (old, q_old, task_old)):
+            sample_plan_task(t, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
+                             plan.ee_jacobian_lin, qo, to)
+        x = (t - new.t0_s) / blend_s
+        w = x * x * (3.0 - 2.0 * x)
+        q_ref, task_ref = q_old + w * (q_new - q_old), task_old + w * (task_new - task_old)
+        q_out, task_out = np.empty(7), np.empty((3, 3))
+        sample_plan_blend(t, new.t0_s, new.dt_s, new.q_rad, new.dq_rad_s, new.ddq_rad_s2, new.ee_pos_m[0],
+                          new.ee_jacobian_lin, old.t0_s, old.dt_s, old.q_rad, old.dq_rad_s, old.ddq_rad_s2,
+                          old.ee_pos_m[0], old.ee_jacobian_lin, blend_s, q_out, task_out)
+        assert np.array_equal(q_out, q_ref) and np.array_equal(task_out, task_ref), t
+
+
+def test_compiled_rollout_equals_the_numpy_rows_bit_for_bit():
+    rng = np.random.default_rng(6)
+    for n in (0, 1, 20):
+        q0, dq0, ddq, dt = rng.normal(size=7), rng.normal(size=7), rng.normal(0, 10, (n, 7)), float(rng.uniform(0.001, 0.05))
+        q_ref, dq_ref = np.empty((n + 1, 7)), np.empty((n + 1, 7))
+        q_ref[0], dq_ref[0] = q0, dq0
+        for k in range(n):
+            dq_ref[k + 1] = dq_ref[k] + dt * ddq[k]
+            q_ref[k + 1] = q_ref[k] + dt * dq_ref[k] + 0.5 * dt * dt * ddq[k]
+        q, dq = rollout(q0, dq0, ddq, dt)
+        assert np.array_equal(q, q_ref) and np.array_equal(dq, dq_ref)
 
 
 @pytest.mark.parametrize("tail", ["resting", "leading"])

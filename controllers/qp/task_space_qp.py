@@ -226,7 +226,8 @@ class TaskSpaceQP:
         """Torques (7,) N*m that track ``ref`` within limits, the torque rate included; a safe fallback
         (counted) if no solver solves it. The result becomes ``tau_last`` (the caller sends it to the robot)."""
         self.solves += 1
-        self._ensure_started(terms)
+        if self.tau_last is None:
+            self._ensure_started(terms)
         tau = np.empty(self.n)
         if self.fast_path:
             ddq, ok = self._solve_fast(terms, q_rad, dq_rad_s, ref, tau)
@@ -249,8 +250,8 @@ class TaskSpaceQP:
                     ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
                     self.tau_last, self.last_ddq, self._params, self._P_x, self._g, self._A_x, self._l, self._u)
         ext = self._ext
-        ext.update_data_vec(q=self._g, l=self._l, u=self._u)
-        ext.update_data_mat(P_x=self._P_x, P_i=None, A_x=self._A_x, A_i=None)
+        ext.update_data_vec(self._g, self._l, self._u)  # (q, l, u) and (P_x, P_i, A_x, A_i): positional arguments
+        ext.update_data_mat(self._P_x, None, self._A_x, None)  # are parsed faster than keywords (0.4 us a tick)
         ext.solve()
         status = int(ext.info.status_val)
         ddq = np.array(ext.solution.x)

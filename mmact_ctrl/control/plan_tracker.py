@@ -19,7 +19,7 @@ import numpy as np
 from controllers.mpc import MPCPlan
 from controllers.robot_model import PandaModel, RobotTerms
 from controllers.rotations import orientation_error
-from controllers.tick_kernels import sample_plan_task
+from controllers.tick_kernels import sample_plan_blend, sample_plan_task
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.samples import SmoothedSample, TrackedReference
 
@@ -136,17 +136,14 @@ class PlanTracker:
         over the hand-over: the new plan's acceleration differs from the old one's, and a smoothstep between the two
         references ramps the torque the QP needs instead of stepping it."""
         q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
-        sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
-                         plan.ee_jacobian_lin, q_post, task)
-        prev, blend_s = self._prev_plan, self.config.mpc_blend_s
-        if prev is not None and t_s - plan.t0_s < blend_s:
-            q_old, task_old = np.empty(7), np.empty((3, 3))
-            sample_plan_task(t_s, prev.t0_s, prev.dt_s, prev.q_rad, prev.dq_rad_s, prev.ddq_rad_s2, prev.ee_pos_m[0],
-                             prev.ee_jacobian_lin, q_old, task_old)
-            x = (t_s - plan.t0_s) / blend_s
-            w = x * x * (3.0 - 2.0 * x)
-            task = task_old + w * (task - task_old)
-            q_post = q_old + w * (q_post - q_old)
+        prev = self._prev_plan
+        if prev is not None and t_s - plan.t0_s < self.config.mpc_blend_s:  # the smoothstep, compiled
+            sample_plan_blend(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
+                              plan.ee_jacobian_lin, prev.t0_s, prev.dt_s, prev.q_rad, prev.dq_rad_s, prev.ddq_rad_s2,
+                              prev.ee_pos_m[0], prev.ee_jacobian_lin, self.config.mpc_blend_s, q_post, task)
+        else:
+            sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
+                             plan.ee_jacobian_lin, q_post, task)
         return q_post, task
 
     # ---- the update, at the MPC's rate ----------------------------------------------------------------------

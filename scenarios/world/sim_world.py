@@ -99,6 +99,7 @@ class SimWorld:
         self._arm_q_slice = slice(int(self._arm_qpos[0]), int(self._arm_qpos[-1]) + 1)
         self._arm_v_slice = slice(int(self._arm_dof[0]), int(self._arm_dof[-1]) + 1)
         self._finger_qpos = finger_qpos_adr(self.model)
+        self._finger_q0, self._finger_q1 = (int(i) for i in self._finger_qpos)  # state() reads them as scalars
         self._arm_act = arm_actuator_ids(self.model)
         self._grip_act = gripper_actuator_id(self.model)
         self._tcp = tcp_site_id(self.model)
@@ -136,7 +137,9 @@ class SimWorld:
             motions.append(other)
         self._motions = motions
         # static objects are placed once here; step() moves only the others
-        self._moving = [(i, mo) for i, mo in zip(self._mocap, motions) if not isinstance(mo, StaticMotion)]
+        self._moving = [(int(i), mo) for i, mo in zip(self._mocap, motions) if not isinstance(mo, StaticMotion)]
+        ids = [int(i) for i in self._mocap[: len(motions)]]  # objects_pos_m's rows: a slice where they are contiguous
+        self._object_rows = slice(ids[0], ids[-1] + 1) if ids == list(range(ids[0], ids[-1] + 1)) else ids
         self._draw_instruction(rng, seed, target_index, INSTRUCTION_TEMPLATES)
 
         m, d = self.model, self.data
@@ -168,8 +171,9 @@ class SimWorld:
 
     def _place_objects(self, t_s: float, placements) -> None:
         """Move the mocap bodies of ``placements`` ((mocap id, motion) pairs) to their positions at ``t_s``."""
+        mocap_pos = self.data.mocap_pos
         for mocap_id, motion in placements:
-            self.data.mocap_pos[mocap_id] = motion.pos_m(t_s)
+            mocap_pos[mocap_id] = motion.pos_m(t_s)
 
     def _refresh_kinematics(self) -> None:
         if self._kinematics_stale:
@@ -215,7 +219,7 @@ class SimWorld:
             t_s=float(d.time),
             q_rad=d.qpos[self._arm_q_slice].copy(),
             dq_rad_s=d.qvel[self._arm_v_slice].copy(),
-            gripper_m=float(d.qpos[self._finger_qpos].sum()),
+            gripper_m=float(d.qpos[self._finger_q0] + d.qpos[self._finger_q1]),  # a tenth of a fancy-indexed sum's time
             ee_pos_m=d.site_xpos[self._tcp].copy(),
             wrench_ext=self.measured_wrench(),
             gripper_cmd_m=self.gripper_command_m(),
@@ -239,7 +243,7 @@ class SimWorld:
     def objects_pos_m(self) -> np.ndarray:
         """Positions (n_objects, 3) of all objects now, m (row ``target_index`` is the instructed one)."""
         self._require_reset()
-        return self.data.mocap_pos[self._mocap[: len(self._motions)]].copy()
+        return self.data.mocap_pos[self._object_rows].copy()
 
     def measure_target(self) -> np.ndarray | None:
         """Truth + N(0, noise_m^2) per axis, or None with probability ``dropout``."""
