@@ -86,26 +86,6 @@ def test_assembled_qp_equals_the_dense_problem(model):
         np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
 
 
-def test_plan_sample_kernel_matches_mpc_plan():
-    rng = np.random.default_rng(3)
-    n, dt = 20, 0.02
-    ddq = rng.normal(0, 2, (n, 7))
-    q, dq = np.zeros((n + 1, 7)), np.zeros((n + 1, 7))
-    q[0], dq[0] = rng.normal(0, 0.5, 7), rng.normal(0, 0.3, 7)
-    for k in range(n):
-        q[k + 1] = q[k] + dq[k] * dt + 0.5 * ddq[k] * dt * dt
-        dq[k + 1] = dq[k] + ddq[k] * dt
-    jl = rng.normal(0, 0.5, (3, 7))
-    plan = MPCPlan(1.0, dt, q, dq, ddq, np.zeros((n + 1, 3)) + 0.4, True, 0.0, jl)
-    q_out, task = np.empty(7), np.empty((3, 3))
-    for t in np.concatenate([[0.9, 1.0, 1.4, 1.5], rng.uniform(0.95, 1.5, 40)]):
-        sample_plan_task(t, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
-                         plan.ee_jacobian_lin, q_out, task)
-        np.testing.assert_allclose(q_out, plan.sample(t)[0], atol=1e-12)
-        for row, ref in zip(task, plan.sample_task(t)):
-            np.testing.assert_allclose(row, ref, atol=1e-12)
-
-
 def _random_plan(rng, t0_s, n=20, dt=0.02):
     ddq = rng.normal(0, 2, (n, 7))
     q, dq = np.zeros((n + 1, 7)), np.zeros((n + 1, 7))
@@ -114,6 +94,18 @@ def _random_plan(rng, t0_s, n=20, dt=0.02):
         q[k + 1] = q[k] + dq[k] * dt + 0.5 * ddq[k] * dt * dt
         dq[k + 1] = dq[k] + ddq[k] * dt
     return MPCPlan(t0_s, dt, q, dq, ddq, rng.normal(0.4, 0.1, (n + 1, 3)), True, 0.0, rng.normal(0, 0.5, (3, 7)))
+
+
+def test_plan_sample_kernel_matches_mpc_plan():
+    rng = np.random.default_rng(3)
+    plan = _random_plan(rng, 1.0)
+    q_out, task = np.empty(7), np.empty((3, 3))
+    for t in np.concatenate([[0.9, 1.0, 1.4, 1.5], rng.uniform(0.95, 1.5, 40)]):
+        sample_plan_task(t, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
+                         plan.ee_jacobian_lin, q_out, task)
+        np.testing.assert_allclose(q_out, plan.sample(t)[0], atol=1e-12)
+        for row, ref in zip(task, plan.sample_task(t)):
+            np.testing.assert_allclose(row, ref, atol=1e-12)
 
 
 def test_plan_blend_kernel_equals_the_numpy_hand_over_bit_for_bit():

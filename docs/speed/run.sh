@@ -1,7 +1,7 @@
 #!/bin/bash
 # Issue 33's figures (2026-12-04; the floor and the look-ahead rerun 2026-12-05; the quiet 2-core machine, nothing else running; mink from `pip install -e '.[bench]'`)
 set -e
-# the floor beside our tick and mink's solve_ik, on the main job's episode (our policy) and on the expert's
+# the floor beside our tick and mink's solve_ik (rerun 2026-12-05 afternoon after the command path's diet), on the main job's episode (our policy) and on the expert's
 python -m mmact_ctrl.bench --floor --json floor_policy.json > floor_policy.txt
 python -m mmact_ctrl.bench --floor --floor-args "--source expert" --json floor_expert.json > floor_expert.txt
 # the main job's real-time factor as the issue measured it
