@@ -226,8 +226,7 @@ class TaskSpaceQP:
         """Torques (7,) N*m that track ``ref`` within limits, the torque rate included; a safe fallback
         (counted) if no solver solves it. The result becomes ``tau_last`` (the caller sends it to the robot)."""
         self.solves += 1
-        if self.tau_last is None:
-            self._ensure_started(terms)
+        self._ensure_started(terms)
         tau = np.empty(self.n)
         if self.fast_path:
             ddq, ok = self._solve_fast(terms, q_rad, dq_rad_s, ref, tau)
