@@ -16,7 +16,8 @@ source cannot run (``ChunkExecutor.needs``: inpaint with a source without ``plan
 with the reason (none is at the time of writing: the shipped policy and the expert both inpaint).
 
 The hashes are those of one machine and one set of library versions (the record says which: ``made_with``); a
-different CPU or a different numpy / MuJoCo / OSQP / torch may legitimately move the last bits.
+different CPU or a different numpy / MuJoCo / OSQP / torch may legitimately move the last bits. OpenBLAS's kernel,
+which follows the CPU, is pinned (``scenarios.blas``: the command re-executes itself with ``OPENBLAS_CORETYPE``).
 """
 
 from __future__ import annotations
@@ -24,10 +25,12 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from scenarios.blas import PINNED_CORETYPE, VARIABLE, pin_blas_kernel
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.golden_record import (DEFAULT_PATHS, DEADLINE_ORDER, FORMAT, LIBRARIES, PROG, SIMULATED_ORDER,  # noqa: F401
                                      SEEDS, SOURCES, TARGETS, WALL_CLOCK_KEYS, Difference, compare, compare_episode,
@@ -274,6 +277,15 @@ def main(argv: list[str] | None = None) -> int:
     """``--write``: 0 written (1: an episode raised); ``--check``: 0 identical, 1 any difference; 2 bad input."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if argv is None and os.environ.get(VARIABLE) is None and pin_blas_kernel(dict(os.environ)):
+        # the command line: run again on the pinned OpenBLAS kernel (read when numpy loads: scenarios.blas)
+        env = dict(os.environ)
+        pin_blas_kernel(env)
+        sys.stdout.flush()
+        os.execve(sys.executable, [sys.executable, "-m", "scenarios.golden", *sys.argv[1:]], env)
+    if os.environ.get(VARIABLE) != PINNED_CORETYPE and pin_blas_kernel({}):
+        print(f"note: {VARIABLE} is not {PINNED_CORETYPE}: OpenBLAS runs the host's own kernels and the last bits may "
+              f"differ from the record's (scenarios.blas)", file=sys.stderr)
     text = args.write if args.write is not None else args.check
     path = Path(text) if text else DEFAULT_PATHS[args.subset]
     if args.write is not None:

@@ -1,7 +1,16 @@
 """Shared test setup."""
 
-import pytest
-import torch
+import os
+import sys
+
+from scenarios.blas import pin_blas_kernel
+
+# before numpy is loaded (torch loads it): the golden record's bits depend on OpenBLAS's kernel (scenarios.blas)
+assert "numpy" not in sys.modules, "numpy was imported before tests/conftest.py could pin OpenBLAS's kernel"
+pin_blas_kernel(os.environ)
+
+import pytest  # noqa: E402
+import torch  # noqa: E402
 
 
 @pytest.fixture(scope="module")
