@@ -80,6 +80,12 @@ class StackConfig:
             it open until then, whatever the chunk's clock says (``mmact_ctrl.control.grasp_reflex``).
         compliance: the TCP tracks its reference as a spring-damper, stiff or soft per tool axis, whose force is
             capped below ``contact_force_limit_n`` (``controllers.qp.impedance``), in place of stiff tracking.
+        close_below_m: the gripper starts closing only with the TCP below this height, m, in every mode
+            (``mmact_ctrl.control.closing_gate``); None (reach, insert): the chunk's clock decides.
+        descent_band_m: (low, high) TCP heights, m, that the reference passes going down at most at
+            ``descent_speed_m_s`` in a mode that reads the object, and with it the TCP floor as a braking curve in
+            every mode (``mmact_ctrl.control.descent``); None (reach, insert): no such stage.
+        descent_speed_m_s: that speed, m/s.
     """
 
     mode: str = "hybrid"
@@ -109,6 +115,9 @@ class StackConfig:
     contact_force_limit_n: float = 30.0
     grasp_reflex: bool = False
     compliance: bool = False
+    close_below_m: float | None = None
+    descent_band_m: tuple[float, float] | None = None
+    descent_speed_m_s: float = 0.05
     target_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
@@ -144,6 +153,15 @@ class StackConfig:
             raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
         if not (math.isfinite(self.contact_force_limit_n) and self.contact_force_limit_n > 0):
             raise ValueError(f"contact_force_limit_n must be a force > 0 N, got {self.contact_force_limit_n}")
+        if self.close_below_m is not None and not math.isfinite(self.close_below_m):
+            raise ValueError(f"close_below_m must be a finite height in m or None, got {self.close_below_m}")
+        if self.descent_band_m is not None:
+            low, high = (float(z) for z in self.descent_band_m)
+            if not (math.isfinite(low) and math.isfinite(high) and high > low >= self.tcp_floor_m):
+                raise ValueError(f"descent_band_m must be (low, high) heights in m with high > low >= tcp_floor_m, "
+                                 f"got {self.descent_band_m!r}")
+        if not (math.isfinite(self.descent_speed_m_s) and self.descent_speed_m_s > 0):
+            raise ValueError(f"descent_speed_m_s must be a speed > 0 m/s, got {self.descent_speed_m_s}")
         if not math.isfinite(self.tcp_floor_m):
             raise ValueError(f"tcp_floor_m must be a finite height in m, got {self.tcp_floor_m}")
         if self.mpc_plan_start not in ("measured", "tracked"):

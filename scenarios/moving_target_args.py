@@ -314,7 +314,7 @@ def _realtime_args(p: argparse.ArgumentParser) -> None:
 def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
     """The stack of ``mode`` from the switches; the task (``--task``) sets the TCP floor it needs and the axes a chunk is
     retargeted on (``scenarios.world.tasks``)."""
-    from scenarios.world.tasks.registry import task_by_name, task_target_box
+    from scenarios.world.tasks.registry import task_by_name, task_guard_settings, task_target_box
 
     task = task_by_name(getattr(args, "task", "reach"))
     return StackConfig(
@@ -343,6 +343,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
         qp=QPConfig(solver=SolverSettings(max_iter=qp_max_iter(args))),
+        **task_guard_settings(task),
     )
 
 

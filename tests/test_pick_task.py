@@ -20,20 +20,18 @@ from mmact_ctrl.control.grasp_reflex import GraspReflex
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from controllers.retarget import RetargetConfig
 from scenarios.world.factory import make_expert, make_world
 from scenarios.world.tasks.pick import PickTask, PickWorld
 from scenarios.world.tasks.pick_scene import CUBE_HALF_M, CUBE_REST_Z_M
 from scenarios.world.tasks.progress import PickProgress
-from scenarios.world.tasks.registry import TASKS, task_by_name
+from scenarios.world.tasks.registry import TASKS, task_by_name, task_stack_settings
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _pick_stack(mode: str, duration_s: float = 6.0, **kw) -> StackConfig:
-    task = PickTask()
-    return StackConfig(mode=mode, duration_s=duration_s, tcp_floor_m=task.tcp_floor_m,
-                       retarget=RetargetConfig(pull_axes=task.pull_axes), **kw)
+    """The pick task's stack (``task_stack_settings``: its floor, retargeting axes, carrier box and guards)."""
+    return StackConfig(mode=mode, duration_s=duration_s, **{**task_stack_settings("pick"), **kw})
 
 
 def _hold_arm(world) -> np.ndarray:

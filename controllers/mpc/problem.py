@@ -104,7 +104,11 @@ def _cost_and_gaps(cfg: MPCConfig, par: _Params, us: list[ca.SX], qs: list[ca.SX
         gaps.append(dq_prev + dt * uk - dq1)
         cost += cfg.w_acc * ca.sumsqr(uk) + cfg.w_jerk * ca.sumsqr(uk - u_before)
         dqq = q1 - par.q0
-        cost += cfg.w_pos * ca.sumsqr(jl @ dqq - par.e_pos[:, k])
+        e = jl @ dqq - par.e_pos[:, k]
+        if cfg.w_pos_z_scale == 1.0:  # the published problem, expression for expression
+            cost += cfg.w_pos * ca.sumsqr(e)
+        else:
+            cost += cfg.w_pos * (ca.sumsqr(e[0:2]) + cfg.w_pos_z_scale * e[2] * e[2])
         cost += cfg.w_rot * ca.sumsqr(ja @ dqq - par.r_ref[:, k])
         cost += cfg.w_posture * ca.sumsqr(q1 - par.q_nom) + cfg.w_vel * ca.sumsqr(dq1)
         if cfg.w_null_posture > 0.0:

@@ -30,6 +30,8 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
+from mmact_ctrl.control.closing_gate import ClosingGate
+from mmact_ctrl.control.descent import DescentGovernor
 from mmact_ctrl.control.grasp_reflex import GraspReflex, reflex_refusal
 from mmact_ctrl.control.plan_tracker import PlanTracker
 from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, SmoothedSample, TickOutput
@@ -88,6 +90,10 @@ class HybridController:
         self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m)
         self.floor = FloorClamp(config.tcp_floor_m)
         self.reflex = GraspReflex(config.grasp_reflex)
+        self.closing_gate = ClosingGate(config.close_below_m, config.dt_s)
+        self.descent = (None if config.descent_band_m is None else  # the band only where the hand follows the object
+                        DescentGovernor(config.descent_band_m if layers.reads_target else None, config.descent_speed_m_s,
+                                        config.tcp_floor_m, config.dt_s))
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -203,6 +209,9 @@ class HybridController:
         self.chunk.reset(pos, rotvec, gripper_m)
         self.floor.clamps = 0
         self.reflex.reset()
+        self.closing_gate.reset()
+        if self.descent is not None:
+            self.descent.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -314,9 +323,16 @@ class HybridController:
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
         if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
             pos = self.force_guard.apply(pos)
+            if self.descent is not None:  # a guarded move also stops going on into the contact
+                vel, acc = self.force_guard.halt(vel, acc)
+        gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
+        if self.closing_gate.close_below_m is not None:  # not before the hand is down, no lift while closing
+            gripper_m = self.closing_gate(gripper_m, float(terms.pos_m[2]))
+            pos, vel, acc = self.closing_gate.hold(pos, vel, acc)
+        if self.descent is not None:  # a guarded move past the objects' top, the floor as a braking curve
+            pos, vel, acc = self.descent(pos, vel, acc)
         tau = self.qp.solve(terms, q_rad, dq_rad_s,
                             TaskReference(pos, vel, acc, s.rot, s.ang_vel_rad_s, s.ang_acc_rad_s2, q_post))
-        gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
         self._gripper_m = gripper_m
         return TickOutput(tau_nm=tau, gripper_m=gripper_m, ref_pos_m=s.pos_m, ee_pos_m=terms.pos_m,
                           ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])

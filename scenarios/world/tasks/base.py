@@ -19,6 +19,12 @@ class Task(Protocol):
         world_class: the ``SimWorld`` subclass of its scene (constructed as ``SimWorld`` is).
         contact: whether the robot touches things (the stack then checks the contact force).
         pull_axes: the axes the hybrid layer retargets a chunk on (``controllers.retarget.PULL_AXES``).
+        descent_band_m: (low, high) TCP heights the hand passes at a guarded move's speed, where the fingertips pass
+            the top of the task's objects (``StackConfig.descent_band_m``); None: no band.
+        close_below_m: the gripper starts closing only with the TCP below this height (``StackConfig.close_below_m``);
+            None: the chunk's clock decides.
+        mpc_z_weight: the MPC's weight on the vertical position error relative to the horizontal
+            (``controllers.mpc.MPCConfig.w_pos_z_scale``; 1: alike).
     """
 
     name: str
@@ -26,6 +32,9 @@ class Task(Protocol):
     world_class: type
     contact: bool
     pull_axes: str
+    descent_band_m: tuple[float, float] | None
+    close_below_m: float | None
+    mpc_z_weight: float
 
     def add_to_scene(self, spec, config) -> None:
         """Add the task's bodies, pads and contact settings to the MjSpec of the Panda scene."""

@@ -138,6 +138,9 @@ class InsertTask:
     #: peg's bottom, so a chunk's aim is never the mouth itself
     pull_axes = "xy"
     contact = True
+    descent_band_m = None
+    close_below_m = None
+    mpc_z_weight = 1.0
     #: the gripper squeezes the peg with about 40 N a finger (the Franka Hand: 70 N continuous); at 20 N the peg slid
     #: and turned in the fingers under the push (hybrid 40 of 50 seated, 11 of its 12 failures with 11-23 mm of slip)
     scene_overrides = {"gripper_kp": 2000.0, "n_objects": 1}

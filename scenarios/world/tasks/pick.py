@@ -22,6 +22,15 @@ from scenarios.world.tasks.progress import PickProgress
 #: success: lifted this far above the carrier, for this long
 LIFT_M = 0.05
 HOLD_S = 1.0
+#: the open fingertips reach this far below the TCP, m (the finger geoms' lowest corner on the model)
+FINGERTIP_BELOW_TCP_M = 0.0095
+#: the TCP heights at which the fingertips pass the cubes' top (from 3 mm below it to 4 mm above), m: an open hand that
+#: lands on a cube at the approach's 0.25 m/s peaked at 60-110 N (pick at 0.4 m/s, seeds 1001-1015)
+DESCENT_BAND_M = (CUBE_REST_Z_M + CUBE_HALF_M + FINGERTIP_BELOW_TCP_M - 0.003,
+                  CUBE_REST_Z_M + CUBE_HALF_M + FINGERTIP_BELOW_TCP_M + 0.004)
+#: the gripper starts closing only with the TCP this close above its grasp height (the expert's: 6 mm above the
+#: cube's centre), m: the fingertips then 2 cm below the cubes' top, the pads on the cube's sides
+CLOSE_BELOW_M = CUBE_REST_Z_M + 0.006 + 0.008
 #: the distractor starts this far from the instructed cube, m
 DISTRACTOR_GAP_M = (0.12, 0.2)
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -160,6 +169,14 @@ class PickTask:
     scene_overrides = {"gripper_kp": 1000.0}
     #: the axes the hybrid layer retargets a chunk on (``controllers.retarget.PULL_AXES``)
     pull_axes = "xy"
+    #: the hand passes the cubes' top with its fingertips at a guarded move's speed (``StackConfig.descent_band_m``)
+    descent_band_m = DESCENT_BAND_M
+    #: the gripper starts closing only with the fingertips below the cubes' top (``StackConfig.close_below_m``)
+    close_below_m = CLOSE_BELOW_M
+    #: the MPC weighs height 4x (``MPCConfig.w_pos_z_scale``): with the axes alike, a plan catching up 40 cm sideways
+    #: went 13 cm under its reference, down to the cubes, and swept the open fingers into one at 1.2 m/s (60 N);
+    #: measured on pick at 0.4 m/s (seeds 1000-1019, hybrid): 4x kept success (11/20), 10x cost it (8/20)
+    mpc_z_weight = 4.0
     world_class = PickWorld
 
     def add_to_scene(self, spec, config: SceneConfig) -> None:

@@ -19,6 +19,9 @@ class ReachTask:
     world_class = SimWorld
     #: no contact: the stack needs no contact-force limit
     contact = False
+    descent_band_m = None
+    close_below_m = None
+    mpc_z_weight = 1.0
     #: SceneConfig fields the task sets (none: reach's scene is the base scene)
     scene_overrides: dict = {}
 

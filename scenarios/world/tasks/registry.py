@@ -31,8 +31,23 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
     task = task_by_name(name)
     box = task_target_box(task)
     return {**({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
-            **({"target_box_m": box} if box is not None else {}),
+            **({"target_box_m": box} if box is not None else {}), **task_guard_settings(task),
             "retarget": RetargetConfig(pull_axes=task.pull_axes), "compliance": bool(compliance)}
+
+
+def task_guard_settings(task) -> dict:
+    """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``)
+    as ``StackConfig`` settings; none for a task without them (reach, insert: their stacks as published)."""
+    out = {}
+    if task.mpc_z_weight != 1.0:
+        from controllers.mpc import MPCConfig
+
+        out["mpc"] = MPCConfig(w_pos_z_scale=float(task.mpc_z_weight))
+    if task.descent_band_m is not None:
+        out["descent_band_m"] = tuple(float(z) for z in task.descent_band_m)
+    if task.close_below_m is not None:
+        out["close_below_m"] = float(task.close_below_m)
+    return out
 
 
 def task_target_box(task) -> tuple[tuple[float, ...], tuple[float, ...]] | None:

@@ -1,0 +1,72 @@
+"""The closing gate (``StackConfig.close_below_m``): the gripper does not start closing while the hand is too high.
+
+A chunk closes the gripper on its own clock, at the time it planned the hand to be down at the object. When the hand
+is late coming down (a plan that passes the objects' top at a guarded move's speed, ``MPCConfig.descent_band_m``),
+fingers that close on the clock close above the object, and the closed hand then comes down on its top: measured on
+pick at 0.4 m/s, 85-111 N. The gate holds a command to close open until the TCP is below ``close_below_m``; once
+the gripper has started closing, it passes every command (a held object is not let go when the hand lifts). It reads
+the TCP's height only, so it is the same in every mode. None (reach, insert): the chunk's command passes unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M
+
+#: a command below this closes the fingers, m (any step down from open: a chunk's closing ramps through the
+#: waypoints' interpolation, and a partial closing high above the object is the closing the gate holds back)
+OPEN_FROM_M = GRIPPER_OPEN_M - 1e-3
+
+#: once the gripper starts closing, the hand does not rise for this long, s: the Franka Hand's fingers close at 0.1
+#: m/s each, 0.175 s from open onto a 4.5 cm cube (a chunk that lifts on its own clock, planned for a closing that
+#: the gate held back, would otherwise lift open fingers)
+HOLD_S = 0.2
+
+
+class ClosingGate:
+    """See the module. ``held_ticks`` counts the ticks a command to close was held open."""
+
+    def __init__(self, close_below_m: float | None, dt_s: float = 0.001) -> None:
+        self.close_below_m = close_below_m
+        self.hold_ticks = int(round(HOLD_S / dt_s))
+        self.reset()
+
+    def reset(self) -> None:
+        self.closing = False
+        self.held_ticks = 0
+        self._hold_left = 0
+        self._hold_z_m = np.inf
+
+    def hold(self, pos_m: np.ndarray, vel_m_s: np.ndarray,
+             acc_m_s2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The reference kept from rising above its height at the closing's start for ``HOLD_S`` after it (the same
+        arrays when it does not rise)."""
+        if self._hold_left <= 0:
+            return pos_m, vel_m_s, acc_m_s2
+        self._hold_left -= 1
+        if self._hold_z_m == np.inf:
+            self._hold_z_m = float(pos_m[2])
+        if pos_m[2] <= self._hold_z_m and vel_m_s[2] <= 0.0 and acc_m_s2[2] <= 0.0:
+            return pos_m, vel_m_s, acc_m_s2
+        pos_m, vel_m_s, acc_m_s2 = pos_m.copy(), vel_m_s.copy(), acc_m_s2.copy()
+        pos_m[2] = min(pos_m[2], self._hold_z_m)
+        vel_m_s[2] = min(vel_m_s[2], 0.0)
+        acc_m_s2[2] = min(acc_m_s2[2], 0.0)
+        return pos_m, vel_m_s, acc_m_s2
+
+    def __call__(self, gripper_cmd_m: float, tcp_z_m: float) -> float:
+        """The gripper command to pass on (m), for the chunk's (or the reflex's) ``gripper_cmd_m`` and the TCP's
+        height ``tcp_z_m`` now."""
+        if self.close_below_m is None:
+            return gripper_cmd_m
+        if gripper_cmd_m >= OPEN_FROM_M:  # open: the next closing is gated again
+            self.closing = False
+            return gripper_cmd_m
+        if not self.closing and tcp_z_m > self.close_below_m:
+            self.held_ticks += 1
+            return GRIPPER_OPEN_M
+        if not self.closing:  # the closing starts: the hand stays down while the fingers close
+            self._hold_left, self._hold_z_m = self.hold_ticks, np.inf
+        self.closing = True
+        return gripper_cmd_m

@@ -1,0 +1,111 @@
+"""The guarded descent of the contact tasks: the descent governor, the closing gate, the force guard's halt and the
+MPC's height weight, each on its own, and in the loop on the pick episodes where each was measured to be needed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controllers.mpc import MPCConfig, TaskSpaceMPC
+from controllers.robot_model import PandaModel
+from mmact_ctrl.config import StackConfig
+from mmact_ctrl.control.closing_gate import HOLD_S, ClosingGate
+from mmact_ctrl.control.descent import BRAKE_M_S2, DescentGovernor
+from mmact_ctrl.control.force_guard import ContactForceGuard
+from mmact_ctrl.controller import HybridController
+from mmact_ctrl.loop import run_episode
+from mmact_ctrl.metrics import episode_metrics
+from scenarios.world.factory import make_expert, make_world
+from scenarios.world.tasks.pick import CLOSE_BELOW_M, DESCENT_BAND_M, PickTask
+from scenarios.world.tasks.registry import task_stack_settings
+
+DT = 0.001
+
+
+def _descend(gov: DescentGovernor, z_ref: np.ndarray) -> np.ndarray:
+    """The governed heights of a reference ``z_ref`` (one per tick)."""
+    return np.array([gov(np.array([0.5, 0.0, z]), np.array([0.0, 0.0, -0.3]), np.zeros(3))[0][2] for z in z_ref])
+
+
+def test_the_governor_passes_the_band_at_its_speed_and_brakes_onto_the_floor():
+    low, high, floor = 0.05, 0.06, 0.025
+    gov = DescentGovernor((low, high), 0.05, floor, DT)
+    z_ref = 0.2 - 0.3 * DT * np.arange(2000)  # 0.3 m/s straight down, far past the floor
+    z = _descend(gov, z_ref)
+    speed = -np.diff(z) / DT
+    in_band = (z[:-1] > low + 1e-4) & (z[:-1] <= high)  # steps that start in the band
+    assert in_band.sum() > 100 and speed[in_band].max() <= 0.05 + 1e-9  # the guarded move
+    assert z.min() >= floor and z[-1] < floor + 1e-3  # onto the floor, never through it
+    above = z[1:] > high + 0.05  # high above the band, a 0.3 m/s descent is not slowed
+    assert np.allclose(z[1:][above], z_ref[1:][above])
+    assert gov.governed_ticks > 0
+    # the braking curve: never faster than a stop at BRAKE_M_S2 onto the band's speed allows
+    start = z[:-1]
+    band_curve = 0.05 + np.sqrt(2 * BRAKE_M_S2 * np.maximum(start - high, 0.0))
+    floor_curve = np.sqrt(2 * BRAKE_M_S2 * np.maximum(start - floor, 0.0))
+    allowed = np.where(start > low, np.minimum(band_curve, floor_curve), floor_curve)
+    assert np.all(speed <= allowed + 1e-9)
+
+
+def test_the_governor_leaves_a_rising_or_slow_reference_alone():
+    gov = DescentGovernor((0.05, 0.06), 0.05, 0.025, DT)
+    pos, vel, acc = np.array([0.5, 0.0, 0.055]), np.array([0.0, 0.0, 0.1]), np.zeros(3)
+    assert gov(pos, vel, acc)[0] is pos
+    up = np.array([0.5, 0.0, 0.056])
+    assert gov(up, vel, acc)[0] is up  # going up: the same arrays
+    slow = np.array([0.5, 0.0, 0.056 - 0.01 * DT])  # 0.01 m/s down in the band: under its speed
+    assert gov(slow, vel, acc)[0] is slow and gov.governed_ticks == 0
+
+
+def test_the_closing_gate_holds_the_fingers_open_until_the_hand_is_down_and_the_hand_down_while_they_close():
+    gate = ClosingGate(0.04, DT)
+    assert gate(0.0, 0.08) == pytest.approx(0.08) and gate.held_ticks == 1  # too high: held open
+    assert gate(0.06, 0.08) == pytest.approx(0.08)  # a partial closing up high is held too
+    assert gate(0.0, 0.035) == 0.0  # down: it closes
+    assert gate(0.0, 0.2) == 0.0  # closing: it goes on, however high the hand goes (a held cube is not let go)
+    lifted = np.array([0.5, 0.0, 0.06])  # the chunk lifts on its own clock while the fingers close
+    first = gate.hold(np.array([0.5, 0.0, 0.035]), np.zeros(3), np.zeros(3))[0]
+    held = [gate.hold(lifted, np.array([0.0, 0.0, 0.2]), np.ones(3)) for _ in range(int(HOLD_S / DT) - 1)]
+    assert all(p[2] == first[2] and v[2] == 0.0 and a[2] == 0.0 for p, v, a in held)
+    assert gate.hold(lifted, np.zeros(3), np.zeros(3))[0] is lifted  # after HOLD_S the lift goes on
+    assert gate(0.08, 0.2) == pytest.approx(0.08) and not gate.closing  # opened: the next closing is gated again
+    assert ClosingGate(None)(0.0, 1.0) == 0.0  # none: the command passes
+
+
+def test_the_force_guard_stops_the_reference_going_into_the_contact():
+    g = ContactForceGuard(limit_n=30.0, dt_s=DT)
+    vel, acc = np.array([0.1, 0.0, -0.25]), np.array([0.0, 0.0, -2.0])
+    assert g.halt(vel, acc)[0] is vel  # no contact: unchanged
+    g.update(np.array([0.0, 0.0, 25.0]))  # pressed from below
+    v, a = g.halt(vel, acc)
+    assert v[2] == 0.0 and a[2] == 0.0 and v[0] == 0.1  # no more down, sideways unchanged
+    v, a = g.halt(np.array([0.0, 0.0, 0.2]), np.zeros(3))
+    assert v[2] == 0.2  # away from the contact: unchanged
+    g.update(np.zeros(3))
+    assert g.halt(vel, acc)[0] is vel  # released: unchanged
+
+
+def test_the_mpc_keeps_its_height_while_catching_up_sideways_when_height_weighs_more():
+    model = PandaModel()
+    q = np.array(model.home_q_rad)
+    pos, _, jac = model.kinematics(q)
+    ref = pos + np.array([0.0, 0.3, 0.0])  # far to the side, at the same height
+    drops = {}
+    for scale in (1.0, 4.0):
+        mpc = TaskSpaceMPC(MPCConfig(w_pos_z_scale=scale, max_solve_ms=np.inf), q_nominal_rad=model.home_q_rad)
+        plan = mpc.solve(0.0, q, np.zeros(7), pos, jac, ref)
+        assert plan.ok
+        drops[scale] = float(np.max(np.abs(plan.ee_pos_m[:, 2] - pos[2])))
+    assert drops[4.0] < 0.5 * drops[1.0], drops
+    with pytest.raises(ValueError, match="w_pos_z_scale"):
+        MPCConfig(w_pos_z_scale=0.0)
+
+
+def test_the_pick_task_asks_for_its_guards_and_reach_for_none():
+    s = task_stack_settings("pick")
+    assert s["descent_band_m"] == DESCENT_BAND_M and s["close_below_m"] == CLOSE_BELOW_M
+    assert s["mpc"].w_pos_z_scale == PickTask.mpc_z_weight > 1.0
+    assert task_stack_settings("reach") == {}
+    assert "descent_band_m" not in task_stack_settings("insert") and "mpc" not in task_stack_settings("insert")
+    with pytest.raises(ValueError, match="descent_band_m"):
+        StackConfig(descent_band_m=(0.06, 0.05))
