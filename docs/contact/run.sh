@@ -1,5 +1,6 @@
 #!/bin/bash
-# Issue 32's figures (pick: rerun 2026-12-04 on the final code of that day: the wall-aware expert, the box in the fast layer;
+# Issue 32's figures (pick: rerun 2026-12-06 with the guarded descent: the descent governor, the closing gate, the guard's halt,
+# the MPC's height weight (the 2026-12-04 run before it: README, Contact);
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
