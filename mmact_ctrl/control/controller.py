@@ -28,10 +28,10 @@ from controllers.target_estimator import TargetEstimator
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
-from mmact_ctrl.control.floor import FloorClamp
-from mmact_ctrl.control.force_guard import ContactForceGuard
 from mmact_ctrl.control.closing_gate import ClosingGate
 from mmact_ctrl.control.descent import DescentGovernor
+from mmact_ctrl.control.floor import FloorClamp
+from mmact_ctrl.control.force_guard import ContactForceGuard
 from mmact_ctrl.control.grasp_reflex import GraspReflex, reflex_refusal
 from mmact_ctrl.control.plan_tracker import PlanTracker
 from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, SmoothedSample, TickOutput
