@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 34's figures (2026-12-04, the 2-core machine; the insert exports and their replay rerun 2026-12-05 after the grip fixes): LeRobotDataset v3.0 exports of 50 scripted-expert episodes
+# Issue 34's figures (2026-12-04, the 2-core machine; the insert exports and their replay rerun 2026-12-05 after the grip fixes; the pick exports, their doctor reports and replay rerun 2026-12-06 after the guarded descent): LeRobotDataset v3.0 exports of 50 scripted-expert episodes
 # (lead velocity, open loop, 1 Hz, 200 ms, 6 s episodes, 2 mm noise, 10 % dropout: moving_target's defaults), seeds
 # 2000-2049, 2 cameras (front, side) at 96 px and 224 px, 10 fps; each checked by lerobot-doctor (its JSON report
 # beside the figure), read back frame by frame (--verify), and replayed through --source lerobot:DIR in open loop.
