@@ -13,7 +13,8 @@ down at each height:
   going on into a contact), above ``high`` by a braking curve onto that speed. The band costs time, which only a mode
   that keeps the hand over the moving object can afford: measured on pick at 0.2 m/s (seeds 1000-1019), open loop
   with the band grasped 0 of 20 (where the object was 0.15 s earlier; 16 of 20 without it, the closing gate kept),
-  hybrid 18 of 20; at 0.4 m/s hybrid's episodes over the contact-force limit went from 5 to 1 of 20 with it.
+  hybrid 18 of 20; on the reversal at 0.2 m/s (hybrid, seeds 1000-1049) the episodes over the contact-force limit
+  were 27 without the band, 7 with it (picks 26, 28).
 
 It limits the reference's own descent (the QP tracks it within a millimetre or two), with the allowed speed as the
 velocity's floor and no downward acceleration while it governs; a reference going up, or coming down slower than

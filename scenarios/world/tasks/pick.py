@@ -161,7 +161,7 @@ class PickTask:
 
     name = "pick"
     #: the lowest TCP reference, m: the grasp puts the TCP 6 mm above a cube's centre (3.05 cm); the fingertips reach
-    #: about 1.5 cm below the TCP, the belt's top is at 2 mm
+    #: about 1 cm below the TCP (``FINGERTIP_BELOW_TCP_M``), the belt's top is at 2 mm
     tcp_floor_m = 0.025
     contact = True
     #: the gripper's position gain, N/m: 1000 squeezes a 4.5 cm cube with about 22 N a finger (the Franka Hand holds
@@ -171,7 +171,7 @@ class PickTask:
     pull_axes = "xy"
     #: the hand passes the cubes' top with its fingertips at a guarded move's speed (``StackConfig.descent_band_m``)
     descent_band_m = DESCENT_BAND_M
-    #: the gripper starts closing only with the fingertips below the cubes' top (``StackConfig.close_below_m``)
+    #: the gripper starts closing only with the TCP within 8 mm of its grasp height (``StackConfig.close_below_m``)
     close_below_m = CLOSE_BELOW_M
     #: the MPC weighs height 4x (``MPCConfig.w_pos_z_scale``): with the axes alike, a plan catching up 40 cm sideways
     #: went 13 cm under its reference, down to the cubes, and swept the open fingers into one at 1.2 m/s (60 N);
