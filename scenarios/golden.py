@@ -277,10 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     """``--write``: 0 written (1: an episode raised); ``--check``: 0 identical, 1 any difference; 2 bad input."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if argv is None and os.environ.get(VARIABLE) is None and pin_blas_kernel(dict(os.environ)):
+    env = dict(os.environ)
+    if argv is None and VARIABLE not in env and pin_blas_kernel(env):
         # the command line: run again on the pinned OpenBLAS kernel (read when numpy loads: scenarios.blas)
-        env = dict(os.environ)
-        pin_blas_kernel(env)
         sys.stdout.flush()
         os.execve(sys.executable, [sys.executable, "-m", "scenarios.golden", *sys.argv[1:]], env)
     if os.environ.get(VARIABLE) != PINNED_CORETYPE and pin_blas_kernel({}):

@@ -149,8 +149,8 @@ class PickExpert(ExpertBase):
         s = min_jerk((times - start_s) / 0.6)
         a[:, :3] = tcp if closed else course
         a[:, 2] = tcp[2] + s * (CUBE_REST_Z_M + LIFT_TO_M - tcp[2])
-        if not closed:  # at the grasp height, as the descent put it (the cube's centre was 6 mm lower: the hand
-            grasp = course[:, 2] + GRASP_ABOVE_CENTRE_M  # then pressed the cube into the belt, a 30-40 N wedge)
+        if not closed:  # at the grasp height, as the descent put it (it aimed at the cube's centre, 6 mm lower;
+            grasp = course[:, 2] + GRASP_ABOVE_CENTRE_M  # the reversal's 50 seeds measured the same either way)
             a[:, 2] = grasp + s * (CUBE_REST_Z_M + LIFT_TO_M - grasp)
         a[:, 6] = 0.0
         return a
