@@ -86,6 +86,11 @@ class StackConfig:
             ``descent_speed_m_s`` in a mode that reads the object, and with it the TCP floor as a braking curve in
             every mode (``mmact_ctrl.control.descent``); None (reach, insert): no such stage.
         descent_speed_m_s: that speed, m/s.
+        capture_tol_m: with a descent band, in a mode that reads the object: the hand stays over the band while the
+            object's estimate is off the fingers' axis by more than this, m (``mmact_ctrl.control.capture_gate``);
+            None: no such gate.
+        capture_clear_m: the gate's width across the fingers' axis: an object off the TCP by more than this across it
+            clears the fingers, m.
     """
 
     mode: str = "hybrid"
@@ -118,6 +123,8 @@ class StackConfig:
     close_below_m: float | None = None
     descent_band_m: tuple[float, float] | None = None
     descent_speed_m_s: float = 0.05
+    capture_tol_m: float | None = None
+    capture_clear_m: float = 0.037
     target_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     qp: QPConfig = field(default_factory=QPConfig)
     smoother: SmootherConfig = field(default_factory=SmootherConfig)
@@ -160,6 +167,8 @@ class StackConfig:
             if not (math.isfinite(low) and math.isfinite(high) and high > low >= self.tcp_floor_m):
                 raise ValueError(f"descent_band_m must be (low, high) heights in m with high > low >= tcp_floor_m, "
                                  f"got {self.descent_band_m!r}")
+        if self.capture_tol_m is not None and not (math.isfinite(self.capture_tol_m) and self.capture_tol_m > 0):
+            raise ValueError(f"capture_tol_m must be a distance > 0 in m or None, got {self.capture_tol_m}")
         if not (math.isfinite(self.descent_speed_m_s) and self.descent_speed_m_s > 0):
             raise ValueError(f"descent_speed_m_s must be a speed > 0 m/s, got {self.descent_speed_m_s}")
         if not math.isfinite(self.tcp_floor_m):

@@ -9,13 +9,15 @@ import pytest
 from controllers.mpc import MPCConfig, TaskSpaceMPC
 from controllers.robot_model import PandaModel
 from mmact_ctrl.config import StackConfig
+from mmact_ctrl.control.capture_gate import HYSTERESIS_M, RISE_M_S, CaptureGate
 from mmact_ctrl.control.closing_gate import HOLD_S, ClosingGate
 from mmact_ctrl.control.descent import BRAKE_M_S2, DescentGovernor
 from mmact_ctrl.control.force_guard import ContactForceGuard
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
-from scenarios.world.tasks.pick import CLOSE_BELOW_M, DESCENT_BAND_M, PickTask
+from scenarios.world.tasks.pick import (CAPTURE_CLEAR_M, CAPTURE_TOL_M, CLOSE_BELOW_M, CUBE_HALF_M, DESCENT_BAND_M,
+                                        PickTask)
 from scenarios.world.tasks.registry import task_stack_settings
 
 DT = 0.001
@@ -84,6 +86,60 @@ def test_the_force_guard_stops_the_reference_going_into_the_contact():
     assert g.halt(vel, acc)[0] is vel  # released: unchanged
 
 
+def test_the_capture_gate_keeps_the_open_hand_over_an_object_that_would_not_pass_between_the_fingers():
+    rot = np.diag([1.0, -1.0, -1.0])  # the nominal grasp: the fingers open along the world's y axis
+    safe = 0.06
+    gate = CaptureGate(0.015, 0.037, safe, DT)
+    tcp = np.array([0.5, 0.0, 0.03])
+    low = np.array([0.5, 0.0, 0.03])
+    vel, acc = np.array([0.2, 0.0, -0.1]), np.array([0.0, 0.0, -1.0])
+
+    def run(obj, ref=low):
+        return gate(ref, vel, acc, tcp, rot, obj)
+
+    between = np.array([0.52, 0.01, 0.024])  # 2 cm ahead, 1 cm off the axis: it passes between the open fingers
+    assert run(between)[0] is low and not gate.closed
+    assert gate.off_axis_m(tcp, rot, between) == pytest.approx(-0.01)  # the hand's y is the world's -y
+    clear = np.array([0.56, 0.03, 0.024])  # 3 cm off the axis but 6 cm ahead: clear of the fingers' width
+    assert run(clear)[0] is low and not gate.closed
+    beside = np.array([0.52, 0.02, 0.024])  # 2 cm off the axis, within the fingers' width: a finger would strike it
+    heights = []
+    for _ in range(400):
+        p, v, a = run(beside)
+        heights.append(p[2])
+    rise = np.diff(heights) / DT
+    assert gate.closed and heights[-1] == pytest.approx(safe)  # raised to the safe height ...
+    assert rise.max() <= RISE_M_S + 1e-9 and heights[0] == pytest.approx(low[2] + RISE_M_S * DT)  # ... at its speed
+    assert v[2] == 0.0 and a[2] == 0.0 and v[0] == 0.2  # held there, sideways unchanged
+    high = np.array([0.5, 0.0, 0.08])
+    assert run(beside, ref=high)[0] is high  # above the safe height: unchanged
+    edge = np.array([0.52, 0.015 - HYSTERESIS_M / 2, 0.024])  # inside the tolerance, not by the hysteresis
+    assert run(edge)[0][2] == pytest.approx(safe)
+    assert run(between)[0] is low and not gate.closed  # let go: back down
+    assert run(None)[0] is low  # nothing measured yet: nothing to avoid
+
+
+def test_the_force_guards_yield_is_not_undone_by_the_closing_gates_hold():
+    """The closing gate keeps the hand from rising while the fingers close; a force pushing the hand up (a finger on
+    a cube's edge, wedged against the belt) must still move the reference the QP tracks up: the guard acts after it."""
+    ctl = HybridController(StackConfig(mode="open_loop", use_mpc=False, **task_stack_settings("pick")))
+    q = np.array(ctl.model.home_q_rad)
+    ctl.reset(q)
+    tracked = []
+    solve = ctl.qp.solve
+    ctl.qp.solve = lambda terms, q_rad, dq_rad_s, ref: (tracked.append(ref.pos_m.copy()), solve(terms, q_rad, dq_rad_s,
+                                                                                                  ref))[1]
+    ctl.tick(0.0, q, np.zeros(7))
+    z_free = tracked[-1][2]
+    ctl.closing_gate._hold_left, ctl.closing_gate._hold_z_m = 100, z_free - 0.001  # closing: no rise above z - 1 mm
+    ctl.tick(0.001, q, np.zeros(7))
+    assert tracked[-1][2] == pytest.approx(z_free - 0.001)  # the hold
+    for _ in range(50):
+        ctl.sense_wrench(np.array([0.0, 0.0, 40.0, 0.0, 0.0, 0.0]))  # pushed up, over the guard's threshold
+    ctl.tick(0.002, q, np.zeros(7))
+    assert tracked[-1][2] > z_free - 0.001 + 0.5 * float(ctl.force_guard.offset_m[2]) > z_free - 0.001  # it yields
+
+
 def test_the_mpc_keeps_its_height_while_catching_up_sideways_when_height_weighs_more():
     model = PandaModel()
     q = np.array(model.home_q_rad)
@@ -103,9 +159,12 @@ def test_the_mpc_keeps_its_height_while_catching_up_sideways_when_height_weighs_
 def test_the_pick_task_asks_for_its_guards_and_reach_for_none():
     s = task_stack_settings("pick")
     assert s["descent_band_m"] == DESCENT_BAND_M and s["close_below_m"] == CLOSE_BELOW_M
+    assert s["capture_tol_m"] == CAPTURE_TOL_M and 0.0 < CAPTURE_TOL_M < 0.019  # under a pad's touch
+    assert s["capture_clear_m"] == CAPTURE_CLEAR_M > CUBE_HALF_M + 0.01  # beyond a finger's half-width
     assert s["mpc"].w_pos_z_scale == PickTask.mpc_z_weight > 1.0
     assert task_stack_settings("reach") == {}
     assert "descent_band_m" not in task_stack_settings("insert") and "mpc" not in task_stack_settings("insert")
+    assert "capture_tol_m" not in task_stack_settings("insert")
     with pytest.raises(ValueError, match="descent_band_m"):
         StackConfig(descent_band_m=(0.06, 0.05))
 
@@ -115,9 +174,10 @@ def test_only_a_mode_that_reads_the_object_slows_in_the_band_and_every_mode_has_
     hybrid = HybridController(StackConfig(mode="hybrid", **settings))
     blind = HybridController(StackConfig(mode="open_loop", **settings))
     assert hybrid.descent.low_m == DESCENT_BAND_M[0] and blind.descent.low_m == np.inf
+    assert hybrid.capture.safe_z_m == DESCENT_BAND_M[1] and blind.capture is None  # the gate reads the object
     assert hybrid.closing_gate.close_below_m == blind.closing_gate.close_below_m == CLOSE_BELOW_M
     reach = HybridController(StackConfig(mode="hybrid"))
-    assert reach.descent is None and reach.closing_gate.close_below_m is None
+    assert reach.descent is None and reach.closing_gate.close_below_m is None and reach.capture is None
 
 
 @pytest.mark.parametrize("seed", [1006, 1015])
@@ -139,3 +199,25 @@ def test_the_hand_no_longer_dives_into_the_belt_at_a_carriers_turn(seed):
     assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m
     # the reference is held on the floor; the tracked TCP stays within a few mm of it (fingertips 1 cm over the belt)
     assert log.ee_pos_m[:, 2].min() > PickTask.tcp_floor_m - 0.005
+
+
+@pytest.mark.parametrize("target,speed,seed,duration_s", [("reversal", "0.2", 1018, "3"), ("linear", "0.4", 1032, "5")])
+def test_a_finger_no_longer_strikes_the_cube_beside_it(target, speed, seed, duration_s):
+    """Pick, hybrid, the main job's settings: on these seeds the hand, catching up, came down with the cube 2 cm off
+    the fingers' axis, and a finger struck its side (50 N at the reversal's turn, 45 N at 0.4 m/s). The capture gate
+    keeps the hand over the cubes' top until the cube will pass between the fingers."""
+    from scenarios.moving_target import make_sensor, make_source_and_world
+    from scenarios.moving_target_args import build_parser, stack_config
+
+    args = build_parser().parse_args(["--source", "expert", "--task", "pick", "--target", target, "--speed", speed,
+                                      "--duration-s", duration_s, "--episodes", "1", "--seed", str(seed)])
+    cfg = stack_config(args, "hybrid")
+    source, world = make_source_and_world(args)
+    ctl = HybridController(cfg)
+    try:
+        log = run_episode(world, source, ctl, seed=seed, sensor=make_sensor(args, world, cfg.dt_s))
+    finally:
+        world.close()
+    m = episode_metrics(log)
+    assert ctl.capture.raised_ticks > 0  # the gate acted
+    assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m

@@ -28,6 +28,7 @@ from controllers.target_estimator import TargetEstimator
 from mmact_ctrl.chunk import ActionChunk
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
+from mmact_ctrl.control.capture_gate import CaptureGate
 from mmact_ctrl.control.closing_gate import ClosingGate
 from mmact_ctrl.control.descent import DescentGovernor
 from mmact_ctrl.control.floor import FloorClamp
@@ -94,6 +95,9 @@ class HybridController:
         self.descent = (None if config.descent_band_m is None else  # the band only where the hand follows the object
                         DescentGovernor(config.descent_band_m if layers.reads_target else None, config.descent_speed_m_s,
                                         config.tcp_floor_m, config.dt_s))
+        self.capture = (CaptureGate(config.capture_tol_m, config.capture_clear_m, config.descent_band_m[1], config.dt_s)
+                        if config.capture_tol_m is not None and config.descent_band_m is not None
+                        and layers.reads_target else None)  # the hand over the object's top until it is between
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -212,6 +216,8 @@ class HybridController:
         self.closing_gate.reset()
         if self.descent is not None:
             self.descent.reset()
+        if self.capture is not None:
+            self.capture.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -321,14 +327,16 @@ class HybridController:
         else:
             s = self.smoothed_reference(t_s)
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
-        if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
-            pos = self.force_guard.apply(pos)
-            if self.descent is not None:  # a guarded move also stops going on into the contact
-                vel, acc = self.force_guard.halt(vel, acc)
         gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
         if self.closing_gate.close_below_m is not None:  # not before the hand is down, no lift while closing
             gripper_m = self.closing_gate(gripper_m, float(terms.pos_m[2]))
             pos, vel, acc = self.closing_gate.hold(pos, vel, acc)
+        if self.capture is not None:  # not down past the object's top unless it will pass between the fingers
+            pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, self._object_now(t_s))
+        if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
+            pos = self.force_guard.apply(pos)
+            if self.descent is not None:  # a guarded move also stops going on into the contact
+                vel, acc = self.force_guard.halt(vel, acc)
         if self.descent is not None:  # a guarded move past the objects' top, the floor as a braking curve
             pos, vel, acc = self.descent(pos, vel, acc)
         tau = self.qp.solve(terms, q_rad, dq_rad_s,

@@ -23,6 +23,10 @@ class Task(Protocol):
             the top of the task's objects (``StackConfig.descent_band_m``); None: no band.
         close_below_m: the gripper starts closing only with the TCP below this height (``StackConfig.close_below_m``);
             None: the chunk's clock decides.
+        capture_tol_m: with a descent band, the hand stays over it while the object is off the fingers' axis by more
+            than this, in a mode that reads the object (``StackConfig.capture_tol_m``); None: no such gate.
+        capture_clear_m: across the fingers' axis, an object off the TCP by more than this clears the fingers
+            (``StackConfig.capture_clear_m``; read only with ``capture_tol_m``).
         mpc_z_weight: the MPC's weight on the vertical position error relative to the horizontal
             (``controllers.mpc.MPCConfig.w_pos_z_scale``; 1: alike).
     """
@@ -34,6 +38,8 @@ class Task(Protocol):
     pull_axes: str
     descent_band_m: tuple[float, float] | None
     close_below_m: float | None
+    capture_tol_m: float | None
+    capture_clear_m: float
     mpc_z_weight: float
 
     def add_to_scene(self, spec, config) -> None:

@@ -140,6 +140,8 @@ class InsertTask:
     contact = True
     descent_band_m = None
     close_below_m = None
+    capture_tol_m = None
+    capture_clear_m = 0.0
     mpc_z_weight = 1.0
     #: the gripper squeezes the peg with about 40 N a finger (the Franka Hand: 70 N continuous); at 20 N the peg slid
     #: and turned in the fingers under the push (hybrid 40 of 50 seated, 11 of its 12 failures with 11-23 mm of slip)

@@ -31,6 +31,16 @@ DESCENT_BAND_M = (CUBE_REST_Z_M + CUBE_HALF_M + FINGERTIP_BELOW_TCP_M - 0.003,
 #: the gripper starts closing only with the TCP this close above its grasp height (the expert's: 6 mm above the
 #: cube's centre), m: the fingertips then 2 cm below the cubes' top, the pads on the cube's sides
 CLOSE_BELOW_M = CUBE_REST_Z_M + 0.006 + 0.008
+#: the open fingers' pads' inner faces are this far from the TCP along the fingers' axis, m (measured on the model)
+OPEN_PAD_INNER_M = 0.0415
+#: how far a cube's centre may be off the TCP along the fingers' axis for the open hand to go down over it, m: at 19 mm
+#: a cube's side meets a pad. Measured on pick, hybrid, seeds 1000-1049: the grasps that succeed come down with the
+#: cube 12-18 mm off the axis (the hand lags the cube), so a margin costs picks: 12 mm took 10 of 28 picks on the
+#: reversal, 15 mm 5 of 46 at 0.2 m/s; 18.5 mm none
+CAPTURE_TOL_M = OPEN_PAD_INNER_M - CUBE_HALF_M - 0.0005
+#: across the fingers' axis a cube whose centre is farther off the TCP than this clears the fingers, m (a cube's
+#: half-width, a finger's half-width of about 1 cm, 4.5 mm to spare)
+CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045
 #: the distractor starts this far from the instructed cube, m
 DISTRACTOR_GAP_M = (0.12, 0.2)
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -173,6 +183,10 @@ class PickTask:
     descent_band_m = DESCENT_BAND_M
     #: the gripper starts closing only with the TCP within 8 mm of its grasp height (``StackConfig.close_below_m``)
     close_below_m = CLOSE_BELOW_M
+    #: the open hand goes down past the cubes' top only with the cube within this of the fingers' axis, in a mode
+    #: that reads it (``StackConfig.capture_tol_m``)
+    capture_tol_m = CAPTURE_TOL_M
+    capture_clear_m = CAPTURE_CLEAR_M
     #: the MPC weighs height 4x (``MPCConfig.w_pos_z_scale``): with the axes alike, a plan catching up 40 cm sideways
     #: went 13 cm under its reference, down to the cubes, and swept the open fingers into one at 1.2 m/s (60 N);
     #: measured on pick at 0.4 m/s (seeds 1000-1019, hybrid): 4x kept success (11/20), 10x cost it (8/20)

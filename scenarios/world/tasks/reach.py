@@ -21,6 +21,8 @@ class ReachTask:
     contact = False
     descent_band_m = None
     close_below_m = None
+    capture_tol_m = None
+    capture_clear_m = 0.0
     mpc_z_weight = 1.0
     #: SceneConfig fields the task sets (none: reach's scene is the base scene)
     scene_overrides: dict = {}

@@ -47,6 +47,9 @@ def task_guard_settings(task) -> dict:
         out["descent_band_m"] = tuple(float(z) for z in task.descent_band_m)
     if task.close_below_m is not None:
         out["close_below_m"] = float(task.close_below_m)
+    if getattr(task, "capture_tol_m", None) is not None:
+        out["capture_tol_m"] = float(task.capture_tol_m)
+        out["capture_clear_m"] = float(task.capture_clear_m)
     return out
 
 
