@@ -57,6 +57,24 @@ def test_the_conveyor_carries_a_cube_at_the_commanded_speed():
         world.close()
 
 
+def test_the_carrier_jumps_with_both_cubes():
+    """A jump is the carrier's: both cubes keep their gap (seed 1003's first jump put the instructed cube 1 cm from
+    the other's centre, inside it, when only the instructed one jumped)."""
+    world = make_world("jump", 0.2, noise_m=0.0, dropout=0.0, n_objects=2, task="pick")
+    world.reset(seed=1003)
+    before = world.objects_pos_m()
+    t_jump = world._jumps[0][0]
+    for _ in range(int(round((t_jump + 0.1) / world.dt_s))):
+        world.step(_hold_arm(world), 0.08)
+    after = world.objects_pos_m()
+    moved = np.linalg.norm((after - before)[:, :2], axis=1)
+    assert np.all(moved > 0.05), moved  # both jumped
+    gap_before, gap_after = (np.linalg.norm((p[0] - p[1])[:2]) for p in (before, after))
+    assert gap_after > 0.12 and abs(gap_after - gap_before) < 0.005, (gap_before, gap_after)
+    assert np.all(np.abs(after[:, 2] - CUBE_REST_Z_M) < 0.002)  # resting on the belt, not knocked over or off
+    world.close()
+
+
 class _HeldCubeWorld(PickWorld):
     """A pick world that starts with the instructed cube between the fingers, the fingers closed on it."""
 

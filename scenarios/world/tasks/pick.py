@@ -16,7 +16,8 @@ import numpy as np
 from scenarios.world.panda_scene import GRIPPER_MAX_M, SceneConfig
 from scenarios.world.targets import JumpMotion, TargetSpec, make_motion, plane_workspace
 from scenarios.world.tasks.contact_world import ContactWorld
-from scenarios.world.tasks.pick_scene import (BELT_GEOM, CUBE_BODIES, CUBE_HALF_M, CUBE_REST_Z_M, add_pick_scene)
+from scenarios.world.tasks.pick_scene import (BELT_CENTRE_M, BELT_GEOM, BELT_HALF_M, CUBE_BODIES, CUBE_HALF_M,
+                                              CUBE_REST_Z_M, add_pick_scene)
 from scenarios.world.tasks.progress import PickProgress
 
 #: success: lifted this far above the carrier, for this long
@@ -74,6 +75,10 @@ class PickWorld(ContactWorld):
         self._motion = None
         self._gripper_cmd_m = GRIPPER_MAX_M
         self._jumps: list[tuple[float, np.ndarray]] = []
+        # a cube's centre stays this far inside the belt's top when the carrier jumps it (the instructed cube's course
+        # keeps to its box, well inside; the other rides 12-20 cm beside it)
+        self._on_belt_low = np.array(BELT_CENTRE_M[:2]) - np.array(BELT_HALF_M[:2]) + CUBE_HALF_M
+        self._on_belt_high = np.array(BELT_CENTRE_M[:2]) + np.array(BELT_HALF_M[:2]) - CUBE_HALF_M
         self.progress = PickProgress(LIFT_M, HOLD_S, CUBE_REST_Z_M, m.opt.timestep)
 
     # ---- the episode --------------------------------------------------------------------------------------------
@@ -120,7 +125,7 @@ class PickWorld(ContactWorld):
 
     @staticmethod
     def _jump_steps(motion) -> list[tuple[float, np.ndarray]]:
-        """(time, displacement) of each teleport of a jump motion: the carrier jumps the instructed cube."""
+        """(time, displacement) of each teleport of a jump motion: the carrier jumps with both cubes."""
         if not isinstance(motion, JumpMotion):
             return []
         return [(t, motion.pos_m(t + 1e-6) - motion.pos_m(t - 1e-6)) for t in motion.jump_times_s]
@@ -138,9 +143,9 @@ class PickWorld(ContactWorld):
         t = float(d.time)
         if self._jumps and t >= self._jumps[0][0]:
             _, delta = self._jumps.pop(0)
-            adr = self._cube_q[self.target_index]
-            if d.qpos[adr + 2] < CUBE_REST_Z_M + 0.005:  # on the carrier (not in the hand): it jumps with it
-                d.qpos[adr:adr + 2] += delta[:2]
+            for adr in self._cube_q:  # the carrier jumps with what rides it, as it carries both in every other motion
+                if d.qpos[adr + 2] < CUBE_REST_Z_M + 0.005:  # on the carrier (not in the hand): it jumps with it
+                    d.qpos[adr:adr + 2] = np.clip(d.qpos[adr:adr + 2] + delta[:2], self._on_belt_low, self._on_belt_high)
         self._set_belt(t)
         self.progress.update(t, self._cube_z(), gripper_m, float(np.linalg.norm(self.model.geom_surfacevel[self._belt, :2])),
                              float(np.linalg.norm(self.measured_wrench()[:3])))
