@@ -1,6 +1,7 @@
 #!/bin/bash
 # Issue 32's figures (pick: rerun 2026-12-06 with the guarded descent: the descent governor, the closing gate, the guard's halt,
-# the MPC's height weight (the 2026-12-04 run before it: README, Contact);
+# the MPC's height weight (the 2026-12-04 run before it: README, Contact); the pick lines and pick's fault suite rerun again the same day
+# with the capture gate, the force guard after the closing gate's hold, and the carrier jumping with both cubes;
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
