@@ -169,6 +169,8 @@ class StackConfig:
                                  f"got {self.descent_band_m!r}")
         if self.capture_tol_m is not None and not (math.isfinite(self.capture_tol_m) and self.capture_tol_m > 0):
             raise ValueError(f"capture_tol_m must be a distance > 0 in m or None, got {self.capture_tol_m}")
+        if not (math.isfinite(self.capture_clear_m) and self.capture_clear_m >= 0):
+            raise ValueError(f"capture_clear_m must be a distance >= 0 in m, got {self.capture_clear_m}")
         if not (math.isfinite(self.descent_speed_m_s) and self.descent_speed_m_s > 0):
             raise ValueError(f"descent_speed_m_s must be a speed > 0 m/s, got {self.descent_speed_m_s}")
         if not math.isfinite(self.tcp_floor_m):

@@ -167,6 +167,10 @@ def test_the_pick_task_asks_for_its_guards_and_reach_for_none():
     assert "capture_tol_m" not in task_stack_settings("insert")
     with pytest.raises(ValueError, match="descent_band_m"):
         StackConfig(descent_band_m=(0.06, 0.05))
+    with pytest.raises(ValueError, match="capture_tol_m"):
+        StackConfig(capture_tol_m=-0.01)
+    with pytest.raises(ValueError, match="capture_clear_m"):
+        StackConfig(capture_clear_m=float("nan"))
 
 
 def test_only_a_mode_that_reads_the_object_slows_in_the_band_and_every_mode_has_the_floor_and_the_gate():

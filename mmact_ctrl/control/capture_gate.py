@@ -5,8 +5,8 @@ Pick's remaining contact-force violations after the guarded descent (``mmact_ctr
 at the grasp height beside the object rather than around it: the hand, still catching up after a carrier's turn,
 came down on the chunk's clock 2-3 cm from the cube, and then a finger struck the cube's side as the hand swept on
 (37-52 N within one tick of the first touch, at 0.16 m/s relative), or a finger closed onto the cube's top edge
-and wedged it against the belt (43 N). Measured on the reversal at 0.2 m/s (hybrid, seeds 1000-1049): 6 episodes
-over the contact-force limit, all of this kind. No reaction to the measured force can stop an impact that reaches
+and wedged it against the belt (43 N). Measured on the reversal at 0.2 m/s (hybrid, seeds 1000-1049): 5 of its 6
+episodes over the contact-force limit were of this kind. No reaction to the measured force can stop an impact that reaches
 the limit in one tick: the hand must not be there.
 
 The fingers open along the hand's y axis. An object whose centre is off the TCP by ``a`` along that axis and ``b``
@@ -22,8 +22,8 @@ so it is a layer of the modes that do (hybrid); open loop, blind, gets none.
 The tolerance is the geometry's, without a margin: the grasps that succeed come down with the cube 12-18 mm off the
 axis (the hand lags it), and the pad is met at 19 mm. Measured (hybrid, seeds 1000-1049, 1 Hz, 200 ms; episodes
 over the contact-force limit / picks, without -> with the gate at 18.5 mm): linear 0.2 m/s 0/46 -> 0/45, 0.4 m/s
-6/23 -> 2/23, reversal 6/28 -> 3/29, jump 6/34 -> 5/34 (four of the five are the other cube, which the gate does
-not see). With a margin it cost picks: 12 mm took 10 of 28 on the reversal, 15 mm 5 of 46 at 0.2 m/s; checking the
+6/23 -> 2/23, reversal 6/28 -> 3/29, jump 6/34 -> 5/34 (four of the five a finger on the other cube, which the gate
+does not see; with the carrier jumping both cubes, as the pick world now does, 1/39). With a margin it cost picks: 12 mm took 10 of 28 on the reversal, 15 mm 5 of 46 at 0.2 m/s; checking the
 offset 50 and 100 ms ahead at the estimated relative velocity took 13 of 46 at 0.2 m/s (the velocity estimate is
 noisy).
 """

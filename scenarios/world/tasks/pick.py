@@ -37,7 +37,7 @@ OPEN_PAD_INNER_M = 0.0415
 #: how far a cube's centre may be off the TCP along the fingers' axis for the open hand to go down over it, m: at 19 mm
 #: a cube's side meets a pad. Measured on pick, hybrid, seeds 1000-1049: the grasps that succeed come down with the
 #: cube 12-18 mm off the axis (the hand lags the cube), so a margin costs picks: 12 mm took 10 of 28 picks on the
-#: reversal, 15 mm 5 of 46 at 0.2 m/s; 18.5 mm none
+#: reversal, 15 mm 5 of 46 at 0.2 m/s; 18.5 mm 1 of 46 (``mmact_ctrl.control.capture_gate``)
 CAPTURE_TOL_M = OPEN_PAD_INNER_M - CUBE_HALF_M - 0.0005
 #: across the fingers' axis a cube whose centre is farther off the TCP than this clears the fingers, m (a cube's
 #: half-width, a finger's half-width of about 1 cm, 4.5 mm to spare)
