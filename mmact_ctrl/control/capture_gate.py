@@ -71,9 +71,9 @@ class CaptureGate:
         the object would touch a finger (the same arrays when the gate is open)."""
         if object_pos_m is None:
             return pos_m, vel_m_s, acc_m_s2
-        x, y = tcp_rot[:, 0], tcp_rot[:, 1]
-        d = np.asarray(object_pos_m, dtype=float) - tcp_pos_m
-        a, b = d[0] * y[0] + d[1] * y[1], d[0] * x[0] + d[1] * x[1]
+        dx, dy = float(object_pos_m[0] - tcp_pos_m[0]), float(object_pos_m[1] - tcp_pos_m[1])  # no array a tick
+        a = dx * tcp_rot[0, 1] + dy * tcp_rot[1, 1]
+        b = dx * tcp_rot[0, 0] + dy * tcp_rot[1, 0]
         slack = -HYSTERESIS_M if self.closed else 0.0  # let go only well clear of the edge
         hit = self.danger(abs(a) - slack, abs(b) + slack)
         if hit and not self.closed:

@@ -327,12 +327,13 @@ class HybridController:
         else:
             s = self.smoothed_reference(t_s)
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
-        gripper_m = self.reflex(s.gripper_m, terms.pos_m, self._object_now(t_s)) if self.reflex.enabled else s.gripper_m
+        obj = self._object_now(t_s) if self.reflex.enabled or self.capture is not None else None  # once a tick
+        gripper_m = self.reflex(s.gripper_m, terms.pos_m, obj) if self.reflex.enabled else s.gripper_m
         if self.closing_gate.close_below_m is not None:  # not before the hand is down, no lift while closing
             gripper_m = self.closing_gate(gripper_m, float(terms.pos_m[2]))
             pos, vel, acc = self.closing_gate.hold(pos, vel, acc)
         if self.capture is not None:  # not down past the object's top unless it will pass between the fingers
-            pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, self._object_now(t_s))
+            pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, obj)
         if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
             pos = self.force_guard.apply(pos)
             if self.descent is not None:  # a guarded move also stops going on into the contact
