@@ -24,21 +24,24 @@ from controllers.layout import packed_layout
 QP_PARAMS, N_PARAMS = packed_layout(
     ("kp6", 6), ("kd6", 6), ("w6", 6), ("kp_post", 1), ("kd_post", 1), ("w_post", 1), ("p_diag", 1), ("q_hi", 7),
     ("q_lo", 7), ("v_max", 7), ("a_max", 7), ("tau_lim", 7), ("dt", 1), ("inv_h", 1), ("dtau", 1), ("ddq_step", 7),
-    ("e_max", 1), ("v_tcp", 1))
+    ("e_max", 1), ("v_tcp", 1), ("pos_direct", 1))
 _KP6, _KD6, _W6, _KP_POST, _KD_POST, _W_POST, _P_DIAG = (QP_PARAMS[k] for k in (
     "kp6", "kd6", "w6", "kp_post", "kd_post", "w_post", "p_diag"))
 _Q_HI, _Q_LO, _V_MAX, _A_MAX, _TAU_LIM = (QP_PARAMS[k] for k in ("q_hi", "q_lo", "v_max", "a_max", "tau_lim"))
 _DT, _INV_H, _DTAU, _DDQ_STEP, _E_MAX, _V_TCP = (QP_PARAMS[k] for k in ("dt", "inv_h", "dtau", "ddq_step", "e_max", "v_tcp"))
+_POS_DIRECT = QP_PARAMS["pos_direct"]
 
 
 def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max, a_max, tau_lim, dt_s, brake_horizon_s,
-              dtau_step_nm, ddq_step_rad_s2, pos_err_max_m, tcp_vel_cap_m_s=math.inf):
+              dtau_step_nm, ddq_step_rad_s2, pos_err_max_m, tcp_vel_cap_m_s=math.inf, pos_direct=False):
     """Pack the QP's constants into the flat vector :func:`assemble_qp` reads.
 
     ``dtau_step_nm``: the largest torque change per control step (rate limit x dt, with margin);
     ``ddq_step_rad_s2`` (7,): the largest change of the commanded joint acceleration per step (jerk limit x dt);
     ``pos_err_max_m``: the TCP position error the PD term sees is saturated at this length;
-    ``tcp_vel_cap_m_s``: the TCP velocity the PD term steers toward is capped at this speed."""
+    ``tcp_vel_cap_m_s``: the TCP velocity the PD term steers toward is capped at this speed;
+    ``pos_direct``: the position rows take the ``ref_acc`` argument of :func:`assemble_qp` as their desired
+    acceleration as it is (no PD term): the impedance task's (:func:`impedance_acc`), weighed by ``w6[:3]``."""
     p = np.empty(N_PARAMS)
     p[_KP6:_KP6 + 6], p[_KD6:_KD6 + 6], p[_W6:_W6 + 6] = kp6, kd6, w6
     p[_KP_POST], p[_KD_POST], p[_W_POST], p[_P_DIAG] = kp_post, kd_post, w_post, p_diag
@@ -48,6 +51,7 @@ def qp_params(kp6, kd6, w6, kp_post, kd_post, w_post, p_diag, q_hi, q_lo, v_max,
     p[_DDQ_STEP:_DDQ_STEP + 7] = ddq_step_rad_s2
     p[_E_MAX] = pos_err_max_m
     p[_V_TCP] = tcp_vel_cap_m_s
+    p[_POS_DIRECT] = 1.0 if pos_direct else 0.0
     return p
 
 
@@ -182,7 +186,9 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
     Same problem as ``TaskSpaceQP.problem`` (see there): ``P = J^T W J + p_diag I`` (upper triangle,
     column-major, 28 values), ``g``, ``A = [M; I]`` (column-major, 8 values per column) and the bounds
     ``[tau_lo - h, lb] <= A ddq <= [tau_hi - h, ub]`` (``tau_lo``, ``tau_hi``: :func:`rate_box` around
-    ``tau_last``; ``lb``, ``ub``: :func:`accel_bounds` intersected with :func:`jerk_box` around ``ddq_last``)."""
+    ``tau_last``; ``lb``, ``ub``: :func:`accel_bounds` intersected with :func:`jerk_box` around ``ddq_last``).
+    With the ``pos_direct`` parameter set, ``ref_acc`` is the position rows' desired acceleration itself (the
+    impedance task's, ``--compliance``) and ``ref_pos``, ``ref_vel`` are not read."""
     n = 7
     # task-space error and desired acceleration
     R = np.empty((3, 3))
@@ -201,11 +207,15 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
         vd[i] = ref_vel[i] + params[_KP6 + i] / params[_KD6 + i] * (ref_pos[i] - pos[i]) * e_scale
     vn = math.sqrt(vd[0] * vd[0] + vd[1] * vd[1] + vd[2] * vd[2])
     v_scale = params[_V_TCP] / vn if vn > params[_V_TCP] else 1.0
+    direct = params[_POS_DIRECT] > 0.0
     for i in range(3):
-        e = (ref_pos[i] - pos[i]) * e_scale
-        rv = vd[i] * v_scale - params[_KP6 + i] / params[_KD6 + i] * e if v_scale < 1.0 else ref_vel[i]
-        v, a = rv - vel[i], ref_acc[i] * v_scale
-        r[i] = dJv[i] - (a + params[_KP6 + i] * e + params[_KD6 + i] * v)
+        if direct:
+            r[i] = dJv[i] - ref_acc[i]
+        else:
+            e = (ref_pos[i] - pos[i]) * e_scale
+            rv = vd[i] * v_scale - params[_KP6 + i] / params[_KD6 + i] * e if v_scale < 1.0 else ref_vel[i]
+            v, a = rv - vel[i], ref_acc[i] * v_scale
+            r[i] = dJv[i] - (a + params[_KP6 + i] * e + params[_KD6 + i] * v)
         e, v, a = e_rot[i], ref_w[i] - vel[3 + i], ref_dw[i]
         r[3 + i] = dJv[3 + i] - (a + params[_KP6 + 3 + i] * e + params[_KD6 + 3 + i] * v)
     # P = J^T W J + diag, g = (dJv - a_des)^T W J - w_post ddq_post
@@ -242,6 +252,75 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
     accel_bounds(q, dq, params[_Q_HI:_Q_HI + 7], params[_Q_LO:_Q_LO + 7], params[_V_MAX:_V_MAX + 7],
                  params[_A_MAX:_A_MAX + 7], params[_DT], params[_INV_H], j_eff, lower[n:], upper[n:])
     jerk_box(ddq_last, params[_DDQ_STEP:_DDQ_STEP + 7], lower[n:], upper[n:])
+
+
+@njit(cache=True, nogil=True)
+def impedance_acc(M, J, pos, rot, vel, ref_pos, ref_vel, ref_acc, k3, d3, force_max, out):
+    """The impedance task's desired TCP acceleration (``ImpedanceTask.desired_acc``) into ``out`` (3,), m/s^2:
+    ``Lambda^-1 sat(Lambda a_ref + R (K R'e + D R'e_dot))`` with ``Lambda^-1 = Jp M^-1 Jp'`` (``Jp`` the
+    Jacobian's linear rows; ``M^-1 Jp'`` by Cholesky), ``K``, ``D`` (3,) per tool axis, ``sat`` scaling the force's
+    magnitude down to ``force_max`` (N)."""
+    n = M.shape[0]
+    L = np.zeros((n, n))  # M = L L'
+    for j in range(n):
+        s = M[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = M[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    X = np.empty((n, 3))  # M^-1 Jp'
+    for c in range(3):
+        for i in range(n):  # forward: L y = Jp[c]
+            s = J[c, i]
+            for k in range(i):
+                s -= L[i, k] * X[k, c]
+            X[i, c] = s / L[i, i]
+        for i in range(n - 1, -1, -1):  # back: L' x = y
+            s = X[i, c]
+            for k in range(i + 1, n):
+                s -= L[k, i] * X[k, c]
+            X[i, c] = s / L[i, i]
+    li = np.empty((3, 3))  # Lambda^-1
+    for a in range(3):
+        for b in range(3):
+            s = 0.0
+            for k in range(n):
+                s += J[a, k] * X[k, b]
+            li[a, b] = s
+    # Lambda a_ref = solve(Lambda^-1, a_ref): the adjugate of the symmetric positive 3 x 3
+    c00 = li[1, 1] * li[2, 2] - li[1, 2] * li[2, 1]
+    c01 = li[1, 2] * li[2, 0] - li[1, 0] * li[2, 2]
+    c02 = li[1, 0] * li[2, 1] - li[1, 1] * li[2, 0]
+    c10 = li[0, 2] * li[2, 1] - li[0, 1] * li[2, 2]
+    c11 = li[0, 0] * li[2, 2] - li[0, 2] * li[2, 0]
+    c12 = li[0, 1] * li[2, 0] - li[0, 0] * li[2, 1]
+    c20 = li[0, 1] * li[1, 2] - li[0, 2] * li[1, 1]
+    c21 = li[0, 2] * li[1, 0] - li[0, 0] * li[1, 2]
+    c22 = li[0, 0] * li[1, 1] - li[0, 1] * li[1, 0]
+    det = li[0, 0] * c00 + li[0, 1] * c01 + li[0, 2] * c02
+    f = np.empty(3)
+    f[0] = (c00 * ref_acc[0] + c10 * ref_acc[1] + c20 * ref_acc[2]) / det
+    f[1] = (c01 * ref_acc[0] + c11 * ref_acc[1] + c21 * ref_acc[2]) / det
+    f[2] = (c02 * ref_acc[0] + c12 * ref_acc[1] + c22 * ref_acc[2]) / det
+    # the spring-damper in the tool frame, back to the world
+    sd = np.empty(3)
+    for a in range(3):
+        e = 0.0
+        ev = 0.0
+        for b in range(3):
+            e += rot[b, a] * (ref_pos[b] - pos[b])
+            ev += rot[b, a] * (ref_vel[b] - vel[b])
+        sd[a] = k3[a] * e + d3[a] * ev
+    for a in range(3):
+        f[a] += rot[a, 0] * sd[0] + rot[a, 1] * sd[1] + rot[a, 2] * sd[2]
+    norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+    scale = force_max / norm if norm > force_max else 1.0
+    for a in range(3):
+        out[a] = (li[a, 0] * f[0] + li[a, 1] * f[1] + li[a, 2] * f[2]) * scale
 
 
 @njit(cache=True, nogil=True)

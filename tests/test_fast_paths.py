@@ -86,6 +86,53 @@ def test_assembled_qp_equals_the_dense_problem(model):
         np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
 
 
+def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
+    """``--compliance``'s QP (the impedance task in place of the stiff position task) is assembled by the kernels:
+    the impedance's desired acceleration (``impedance_acc``) on the position rows equals the task objects summed in
+    numpy, with the force cap binding in some states and not in others; its solve keeps the torque rate."""
+    from dataclasses import replace
+
+    from controllers.qp.impedance import ImpedanceTask
+    from controllers.qp.state import QPState
+    from controllers.tick_kernels import impedance_acc
+
+    config = QPConfig()
+    task = ImpedanceTask(force_max_n=20.0)
+    qp = TaskSpaceQP(replace(config, tcp=replace(config.tcp, w_pos=0.0)), extra_tasks=(task,))
+    assert qp.fast_path and qp.impedance is task
+    assert not TaskSpaceQP(config, extra_tasks=(task,)).fast_path  # the stiff task weighed too: the general path
+    rng = np.random.default_rng(7)
+    p_pattern = np.triu(np.ones((7, 7)))
+    k, d = task.gains()
+    capped = 0
+    for _ in range(60):
+        q = model.home_q_rad + rng.normal(0, 0.3, 7)
+        dq = rng.normal(0, 0.5, 7)
+        terms = model.terms(q, dq)
+        qp.reset(terms.h + rng.normal(0, 3.0, 7), rng.normal(0, 8.0, 7))
+        ref = TaskReference(terms.pos_m + rng.normal(0, 0.01, 3), rng.normal(0, 0.1, 3), rng.normal(0, 2, 3),
+                            terms.rot, rng.normal(0, 0.3, 3), rng.normal(0, 1, 3), model.home_q_rad)
+        state = QPState(terms, q, dq, ref, qp.tau_last, qp.last_ddq)
+        acc = np.empty(3)
+        impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2, k, d,
+                      task.force_max_n, acc)
+        np.testing.assert_allclose(acc, task.desired_acc(state), rtol=1e-9, atol=1e-9)
+        capped += int(np.linalg.norm(task.force_n(state)) >= task.force_max_n - 1e-9)
+        P, g, A, lower, upper = qp.problem(terms, q, dq, ref)
+        P_x, g_k, A_x, lo_k, up_k = np.empty(28), np.empty(7), np.empty(56), np.empty(14), np.empty(14)
+        assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
+                    acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
+                    qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
+        np.testing.assert_allclose(P_x, P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(lo_k, lower, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
+        tau_was = qp.tau_last.copy()
+        tau = qp.solve(terms, q, dq, ref)  # the fast path solves it within the torque rows (the robot's condition)
+        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau - tau_was) <= qp.dtau_hard_nm + 1e-12)
+    assert 0 < capped < 60  # the cap bound in some states and not in others
+
+
 def _random_plan(rng, t0_s, n=20, dt=0.02):
     ddq = rng.normal(0, 2, (n, 7))
     q, dq = np.zeros((n + 1, 7)), np.zeros((n + 1, 7))

@@ -49,12 +49,16 @@ class ImpedanceTask:
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"ImpedanceTask.{name} must be a finite number > 0, got {v!r}")
 
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(K, D)``, (3,) each: the spring per tool axis, N/m, and its damper ``2 zeta sqrt(K m)``, N s/m."""
+        k = np.asarray(self.stiffness_n_m, dtype=float)
+        return k, 2.0 * self.damping_ratio * np.sqrt(k * self.nominal_mass_kg)
+
     def spring_damper_n(self, state: QPState) -> np.ndarray:
         """The spring-damper's force (3,) on the TCP, world frame, N (uncapped)."""
         terms, ref = state.terms, state.ref
         rot = terms.rot  # tool -> world
-        k = np.asarray(self.stiffness_n_m, dtype=float)
-        d = 2.0 * self.damping_ratio * np.sqrt(k * self.nominal_mass_kg)
+        k, d = self.gains()
         e_tool = rot.T @ (ref.pos_m - terms.pos_m)
         ev_tool = rot.T @ (ref.vel_m_s - terms.vel[:3])
         return rot @ (k * e_tool + d * ev_tool)

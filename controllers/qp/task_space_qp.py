@@ -16,7 +16,10 @@ one method.
 full sparsity pattern of P (dense upper triangle) and A (dense M block + identity); each tick only the values are
 updated, warm-started, assembled by one compiled kernel (``controllers.tick_kernels.assemble_qp``) straight into the
 CSC value arrays. :meth:`TaskSpaceQP.problem` is the same QP summed from the task objects in numpy (the reference the
-kernel is tested against). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
+kernel is tested against). **Compliance** (``ImpedanceTask`` as the one extra task, the stiff position task weighed 0) runs the fast path too: a
+second kernel (``controllers.tick_kernels.impedance_acc``) computes the impedance's desired acceleration, and the
+position rows take it as theirs with the impedance's weight (the position task, weighed 0, adds nothing: the sum is
+the same problem). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
 limits=...)``): the stacked problem (:func:`controllers.qp.solve.build_problem`) solved by OSQP kept warm across ticks
 (:class:`controllers.qp.warm.WarmProblemSolver`; ``solve_problem``, cold, gave the same within tolerance at ~1.1 ms a
 tick).
@@ -40,6 +43,7 @@ import osqp
 
 from controllers.limits import JointAccelerationBounds
 from controllers.qp.config import QPConfig
+from controllers.qp.impedance import ImpedanceTask
 from controllers.qp.limits import AccelerationJerkLimit, DefaultLimits, EffortRateLimit, ViabilityLimit
 from controllers.qp.solve import build_problem, daqp_ladder, soft_sense, stack_rows
 from controllers.qp.warm import WarmProblemSolver, new_osqp
@@ -47,7 +51,7 @@ from controllers.qp.state import Constraint, QPState, TaskReference
 from controllers.qp.tasks import PostureTask, RegularisationTask, TcpOrientationTask, TcpPositionTask
 from controllers.robot_description import JointLimits
 from controllers.robot_model import RobotTerms
-from controllers.tick_kernels import assemble_qp, clamp_rate, qp_params, torque
+from controllers.tick_kernels import assemble_qp, clamp_rate, impedance_acc, qp_params, torque
 
 
 def default_tasks(config: QPConfig) -> tuple:
@@ -70,15 +74,25 @@ def default_limits(config: QPConfig, joint_limits: JointLimits) -> DefaultLimits
                          ViabilityLimit(bounds, ddq_step, dtau_step, config.dt_s))
 
 
-def _kernel_params(tasks: tuple, limits: DefaultLimits) -> np.ndarray:
-    """The flat parameter vector of ``assemble_qp`` for the default tasks and limits."""
+def _kernel_params(tasks: tuple, limits: DefaultLimits, impedance: ImpedanceTask | None = None) -> np.ndarray:
+    """The flat parameter vector of ``assemble_qp`` for the default tasks and limits (and, with ``impedance``, its
+    weight on the position rows, which then take the impedance's desired acceleration as it is)."""
     pos, ori, post, reg = tasks
     b = limits.viability.bounds
+    w_pos = pos.weight if impedance is None else impedance.weight
     return qp_params(np.array([pos.kp] * 3 + [ori.kp] * 3), np.array([pos.kd] * 3 + [ori.kd] * 3),
-                     np.array([pos.weight] * 3 + [ori.weight] * 3), post.kp, post.kd, post.weight,
+                     np.array([w_pos] * 3 + [ori.weight] * 3), post.kp, post.kd, post.weight,
                      post.weight + reg.weight, b.q_hi, b.q_lo, b.v_max, b.a_max, limits.effort_rate.tau_lim_nm,
                      b.dt_s, 1.0 / b.inv_h, limits.effort_rate.dtau_step_nm, limits.accel_jerk.ddq_step_rad_s2,
-                     pos.pos_err_max_m, pos.tcp_vel_cap_m_s)
+                     pos.pos_err_max_m, pos.tcp_vel_cap_m_s, pos_direct=impedance is not None)
+
+
+def _compiled_impedance(config: QPConfig, extra_tasks: tuple, extra_limits: tuple) -> ImpedanceTask | None:
+    """The impedance task when it is the one extra (no extra limit) and the stiff position task is weighed 0: the
+    sum of the two is then the kernel's problem with the impedance on the position rows."""
+    if len(extra_tasks) == 1 and not extra_limits and type(extra_tasks[0]) is ImpedanceTask and config.tcp.w_pos == 0:
+        return extra_tasks[0]
+    return None
 
 
 class TaskSpaceQP:
@@ -98,12 +112,17 @@ class TaskSpaceQP:
         self.default_limits = default_limits(config, joint_limits)
         self.tasks = default_tasks(config) + tuple(extra_tasks)
         self.limits = self.default_limits.all + tuple(extra_limits)
-        self.fast_path = not extra_tasks and not extra_limits
+        #: the impedance task the fast path computes in its kernel (compliance), or None
+        self.impedance = _compiled_impedance(config, tuple(extra_tasks), tuple(extra_limits))
+        self.fast_path = (not extra_tasks and not extra_limits) or self.impedance is not None
         er = self.default_limits.effort_rate
         #: the largest torque step per control period the QP plans (margined) and the hard guard (just inside the limit)
         self.dtau_step_nm = er.dtau_step_nm
         self.dtau_hard_nm = (1.0 - 1e-6) * config.limits.dtau_max_nm_s * config.dt_s
-        self._params = _kernel_params(self.tasks[:4], self.default_limits)
+        self._params = _kernel_params(self.tasks[:4], self.default_limits, self.impedance)
+        if self.impedance is not None:
+            self._imp_k, self._imp_d = self.impedance.gains()
+        self._imp_acc = np.zeros(3)
         p_pattern = np.triu(np.ones((n, n)))
         a_pattern = np.vstack([np.ones((n, n)), np.eye(n)])
         self._p_pattern, self._a_pattern = p_pattern, a_pattern
@@ -244,9 +263,15 @@ class TaskSpaceQP:
         return self.fallback(terms, q_rad, dq_rad_s)
 
     def _solve_fast(self, terms: RobotTerms, q_rad, dq_rad_s, ref: TaskReference, tau: np.ndarray):
-        """The default set: the compiled assembly, warm-started OSQP, DAQP's rescue. Returns (ddq, ok)."""
+        """The default set (or with compliance's impedance): the compiled assembly, warm-started OSQP, DAQP's rescue.
+        Returns (ddq, ok)."""
+        acc = ref.acc_m_s2
+        if self.impedance is not None:  # the position rows' desired acceleration is the impedance's
+            acc = self._imp_acc
+            impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2,
+                          self._imp_k, self._imp_d, self.impedance.force_max_n, acc)
         assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
-                    ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
+                    acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
                     self.tau_last, self.last_ddq, self._params, self._P_x, self._g, self._A_x, self._l, self._u)
         ext = self._ext
         ext.update_data_vec(self._g, self._l, self._u)  # (q, l, u) and (P_x, P_i, A_x, A_i): positional arguments
