@@ -7,7 +7,8 @@ Each row runs the scripted expert (lead velocity) under the same stack (hybrid: 
 MPC, QP; 1 Hz, 200 ms) for 6 s episodes on the same seeds, and prints the real-time factor (simulated over wall
 time, the whole episode: physics, contacts, the expert, the stack) and the 1 kHz tick's median and p99. The contact
 tasks add MuJoCo contacts (the cubes on the belt, the peg in the fingers and the fixture) and, with
-``--compliance``, the impedance task, which takes the QP off its compiled kernel onto the general path.
+``--compliance``, the impedance task, whose desired acceleration a second compiled kernel computes for the QP's
+fast path (``controllers.tick_kernels.impedance_acc``).
 """
 
 from __future__ import annotations
