@@ -6,8 +6,8 @@
 Each row runs the scripted expert (lead velocity) under the same stack (hybrid: Kalman filter, retargeting, Ruckig,
 MPC, QP; 1 Hz, 200 ms) for 6 s episodes on the same seeds, and prints the real-time factor (simulated over wall
 time, the whole episode: physics, contacts, the expert, the stack), its share of reach's (measured in the same run,
-so it carries from one host to another where the factors themselves do not) and the 1 kHz tick's median and p99. The contact
-tasks add MuJoCo contacts (the cubes on the belt, the peg in the fingers and the fixture) and, with
+so it carries from one host to another where the factors themselves do not) and the 1 kHz tick's median and p99.
+The contact tasks add MuJoCo contacts (the cubes on the belt, the peg in the fingers and the fixture) and, with
 ``--compliance``, the impedance task, whose desired acceleration a second compiled kernel computes for the QP's
 fast path (``controllers.tick_kernels.impedance_acc``).
 """
@@ -78,8 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.episodes < 1:
         p.error(f"--episodes must be >= 1, got {args.episodes}")
     rows, shares = [], []
-    print(f"{'task':<38} {'RTF median':>10} {'RTF min':>8} {'of reach':>9} {'tick median [us]':>17} {'tick p99 [us]':>14} "
-          f"{'success':>8}")
+    print(f"{'task':<38} {'RTF median':>10} {'RTF min':>8} {'of reach':>9} {'tick median [us]':>17} "
+          f"{'tick p99 [us]':>14} {'success':>8}")
     for row in ROWS:
         r = bench_row(*row, episodes=args.episodes, seed=args.seed)
         rows.append(r)

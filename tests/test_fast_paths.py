@@ -123,7 +123,8 @@ def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
         assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
                     acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
                     qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
-        np.testing.assert_allclose(P_x, P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))], rtol=1e-10, atol=1e-12)
+        upper_triangle = P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))]
+        np.testing.assert_allclose(P_x, upper_triangle, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(lo_k, lower, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)

@@ -16,10 +16,10 @@ one method.
 full sparsity pattern of P (dense upper triangle) and A (dense M block + identity); each tick only the values are
 updated, warm-started, assembled by one compiled kernel (``controllers.tick_kernels.assemble_qp``) straight into the
 CSC value arrays. :meth:`TaskSpaceQP.problem` is the same QP summed from the task objects in numpy (the reference the
-kernel is tested against). **Compliance** (``ImpedanceTask`` as the one extra task, the stiff position task weighed 0) runs the fast path too: a
-second kernel (``controllers.tick_kernels.impedance_acc``) computes the impedance's desired acceleration, and the
-position rows take it as theirs with the impedance's weight (the position task, weighed 0, adds nothing: the sum is
-the same problem). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
+kernel is tested against). **Compliance** (``ImpedanceTask`` as the one extra task, the stiff position task weighed
+0) runs the fast path too: a second kernel (``controllers.tick_kernels.impedance_acc``) computes the impedance's
+desired acceleration, and the position rows take it as theirs with the impedance's weight (the position task, weighed
+0, adds nothing: the sum is the same problem). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
 limits=...)``): the stacked problem (:func:`controllers.qp.solve.build_problem`) solved by OSQP kept warm across ticks
 (:class:`controllers.qp.warm.WarmProblemSolver`; ``solve_problem``, cold, gave the same within tolerance at ~1.1 ms a
 tick).
