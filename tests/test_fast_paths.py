@@ -63,7 +63,6 @@ def test_accel_bounds_match_numpy_reference_including_outside_the_viable_set():
 def test_assembled_qp_equals_the_dense_problem(model):
     qp = TaskSpaceQP(QPConfig())
     rng = np.random.default_rng(2)
-    p_pattern = np.triu(np.ones((7, 7)))
     for _ in range(50):
         q = model.home_q_rad + rng.normal(0, 0.3, 7)
         dq = rng.normal(0, 0.5, 7)
@@ -73,17 +72,24 @@ def test_assembled_qp_equals_the_dense_problem(model):
         ref = TaskReference(terms.pos_m + rng.normal(0, 0.05, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1, 3),
                             _rot(rng) @ terms.rot if rng.random() < 0.5 else terms.rot, rng.normal(0, 0.3, 3),
                             rng.normal(0, 1, 3), model.home_q_rad + rng.normal(0, 0.1, 7))
-        P, g, A, lower, upper = qp.problem(terms, q, dq, ref)
-        P_x, g_k, A_x, lo_k, up_k = np.empty(28), np.empty(7), np.empty(56), np.empty(14), np.empty(14)
-        assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
-                    ref.acc_m_s2, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
-                    qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
-        np.testing.assert_allclose(P_x, P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))], rtol=1e-10, atol=1e-12)
-        np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(A_x.reshape(7, 8)[:, :7].T, A[:7], rtol=1e-12)
-        np.testing.assert_array_equal(A_x.reshape(7, 8)[:, 7], np.ones(7))
-        np.testing.assert_allclose(lo_k, lower, rtol=1e-12, atol=1e-9)
-        np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
+        _assert_kernel_equals_problem(qp, terms, q, dq, ref, ref.acc_m_s2)
+
+
+def _assert_kernel_equals_problem(qp, terms, q, dq, ref, acc) -> None:
+    """``assemble_qp`` (the position rows' desired acceleration given as ``acc``, as ``TaskSpaceQP._solve_fast``
+    passes it) equals ``qp.problem``, the QP summed from the task objects in numpy."""
+    P, g, A, lower, upper = qp.problem(terms, q, dq, ref)
+    P_x, g_k, A_x, lo_k, up_k = np.empty(28), np.empty(7), np.empty(56), np.empty(14), np.empty(14)
+    assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
+                acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
+                qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
+    upper_triangle = P.ravel(order="F")[np.flatnonzero(np.triu(np.ones((7, 7))).ravel(order="F"))]
+    np.testing.assert_allclose(P_x, upper_triangle, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(A_x.reshape(7, 8)[:, :7].T, A[:7], rtol=1e-12)
+    np.testing.assert_array_equal(A_x.reshape(7, 8)[:, 7], np.ones(7))
+    np.testing.assert_allclose(lo_k, lower, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
 
 
 def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
@@ -102,7 +108,6 @@ def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
     assert qp.fast_path and qp.impedance is task
     assert not TaskSpaceQP(config, extra_tasks=(task,)).fast_path  # the stiff task weighed too: the general path
     rng = np.random.default_rng(7)
-    p_pattern = np.triu(np.ones((7, 7)))
     k, d = task.gains()
     capped = 0
     for _ in range(60):
@@ -118,16 +123,7 @@ def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
                       task.force_max_n, acc)
         np.testing.assert_allclose(acc, task.desired_acc(state), rtol=1e-9, atol=1e-9)
         capped += int(np.linalg.norm(task.force_n(state)) >= task.force_max_n - 1e-9)
-        P, g, A, lower, upper = qp.problem(terms, q, dq, ref)
-        P_x, g_k, A_x, lo_k, up_k = np.empty(28), np.empty(7), np.empty(56), np.empty(14), np.empty(14)
-        assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
-                    acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q, dq,
-                    qp.tau_last, qp.last_ddq, qp._params, P_x, g_k, A_x, lo_k, up_k)
-        upper_triangle = P.ravel(order="F")[np.flatnonzero(p_pattern.ravel(order="F"))]
-        np.testing.assert_allclose(P_x, upper_triangle, rtol=1e-10, atol=1e-12)
-        np.testing.assert_allclose(g_k, g, rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(lo_k, lower, rtol=1e-12, atol=1e-9)
-        np.testing.assert_allclose(up_k, upper, rtol=1e-12, atol=1e-9)
+        _assert_kernel_equals_problem(qp, terms, q, dq, ref, acc)
         tau_was = qp.tau_last.copy()
         tau = qp.solve(terms, q, dq, ref)  # the fast path solves it within the torque rows (the robot's condition)
         assert np.all(np.isfinite(tau)) and np.all(np.abs(tau - tau_was) <= qp.dtau_hard_nm + 1e-12)
