@@ -262,9 +262,10 @@ def _task_args(p: argparse.ArgumentParser) -> None:
                    help="the fast layer keeps the gripper open until the measured object is between the fingers "
                         "and closes it then, whatever the chunk's clock says (default: the chunk's gripper channel)")
     t.add_argument("--compliance", action="store_true",
-                   help="the TCP tracks its reference as a spring-damper (stiff across, soft along the approach "
-                        "axis) whose force is capped at 2/3 of --contact-force-limit-n, in place of stiff tracking "
-                        "(controllers.qp.impedance); every mode")
+                   help="in contact (a measured force over 3 N, and 0.1 s after), the TCP tracks its reference as a "
+                        "spring-damper whose force is capped at 2/3 of --contact-force-limit-n, in place of stiff "
+                        "tracking (controllers.qp.impedance, mmact_ctrl.control.compliance_gate); stiff in free "
+                        "space; every mode")
     t.add_argument("--contact-force-limit-n", type=_number(float, "--contact-force-limit-n", 0, False), default=30.0,
                    help="external force on the robot above which a tick counts as a contact_force violation (N; "
                         "franka_ros2's default collision thresholds are 30 N lower / 40 N upper)")

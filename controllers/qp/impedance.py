@@ -11,7 +11,10 @@ the spring: a peg held on the chamfer while the hybrid layer's reference acceler
 a_ref = 26 N more, 31.5 N in all). Held still by a contact, the torque the QP sends (``M a_des + h``) makes the TCP
 push with ``f``: never more than the cap,
 which is how the contact-force limit is kept in the QP. The damping is ``2 zeta sqrt(K m)`` for a nominal ``m``.
-It replaces the TCP position task (which the stack then weighs 0); orientation, posture and the limits are unchanged.
+It replaces the TCP position task (weighed 0 meanwhile) while the robot is in contact
+(``TaskSpaceQP(contact_task=...)``, switched by ``mmact_ctrl.control.compliance_gate``): in free space the same cap is
+all the force the arm may use to move its own inertia, and a pick's hand fell 5-8 cm under its reference. Orientation,
+posture and the limits are unchanged.
 """
 
 from __future__ import annotations

@@ -19,7 +19,9 @@ CSC value arrays. :meth:`TaskSpaceQP.problem` is the same QP summed from the tas
 kernel is tested against). **Compliance** (``ImpedanceTask`` as the one extra task, the stiff position task weighed
 0) runs the fast path too: a second kernel (``controllers.tick_kernels.impedance_acc``) computes the impedance's
 desired acceleration, and the position rows take it as theirs with the impedance's weight (the position task, weighed
-0, adds nothing: the sum is the same problem). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
+0, adds nothing: the sum is the same problem). With ``contact_task`` the QP holds both sets and
+:meth:`TaskSpaceQP.set_contact` picks one each tick: the impedance in contact, the stiff position task in free space
+(``--compliance``). **The general path** (any other set of tasks or limits, ``TaskSpaceQP(tasks=...,
 limits=...)``): the stacked problem (:func:`controllers.qp.solve.build_problem`) solved by OSQP kept warm across ticks
 (:class:`controllers.qp.warm.WarmProblemSolver`; ``solve_problem``, cold, gave the same within tolerance at ~1.1 ms a
 tick).
@@ -37,6 +39,7 @@ solver's tolerance left outside the rate limit is clamped onto it (counted in ``
 from __future__ import annotations
 
 from ctypes import c_int
+from dataclasses import replace
 
 import numpy as np
 import osqp
@@ -103,10 +106,13 @@ class TaskSpaceQP:
         joint_limits: the robot's limits.
         extra_tasks: tasks beyond the default set (``controllers.qp.tasks.Task``): the general path.
         extra_limits: limits beyond the default set (``controllers.qp.limits.Limit``): the general path.
+        contact_task: an impedance that takes the TCP position task's place while the robot is in contact
+            (:meth:`set_contact`; ``--compliance``); in free space the position task tracks stiffly. None: the same
+            tasks on every tick.
     """
 
     def __init__(self, config: QPConfig = QPConfig(), joint_limits: JointLimits = JointLimits(),
-                 extra_tasks: tuple = (), extra_limits: tuple = ()) -> None:
+                 extra_tasks: tuple = (), extra_limits: tuple = (), contact_task: ImpedanceTask | None = None) -> None:
         self.config = config
         self.n = n = 7
         self.default_limits = default_limits(config, joint_limits)
@@ -122,6 +128,7 @@ class TaskSpaceQP:
         self._params = _kernel_params(self.tasks[:4], self.default_limits, self.impedance)
         if self.impedance is not None:
             self._imp_k, self._imp_d = self.impedance.gains()
+        self._set_up_contact(contact_task, extra_tasks)
         self._imp_acc = np.zeros(3)
         p_pattern = np.triu(np.ones((n, n)))
         a_pattern = np.vstack([np.ones((n, n)), np.eye(n)])
@@ -143,6 +150,34 @@ class TaskSpaceQP:
         #: the last torque the robot received, N*m (None until :meth:`reset` or the first command: then the
         #: bias torque h of that first state, i.e. the robot holding itself as it does before a controller starts)
         self.tau_last: np.ndarray | None = None
+
+    def _set_up_contact(self, contact_task: ImpedanceTask | None, extra_tasks: tuple) -> None:
+        """The two task sets :meth:`set_contact` switches between: as built (free space), and with the position task
+        weighed 0 and ``contact_task`` in its place (in contact; on the fast path when there is no other extra)."""
+        #: the impedance that replaces the position task in contact (None: no switch), and whether it does now
+        self.contact_task, self.in_contact = contact_task, False
+        self._tasks_free = self._tasks_contact = None  # (tasks, kernel parameters, compiled impedance) of each
+        if contact_task is None:
+            return
+        if type(contact_task) is not ImpedanceTask or self.impedance is not None:
+            raise ValueError(f"contact_task must be an ImpedanceTask, in a QP that has none among its extra tasks; "
+                             f"got {contact_task!r}")
+        soft = default_tasks(replace(self.config, tcp=replace(self.config.tcp, w_pos=0.0))) + tuple(extra_tasks)
+        compiled = contact_task if self.fast_path else None
+        self._tasks_free = (self.tasks, self._params, None)
+        params = self._params if compiled is None else _kernel_params(soft[:4], self.default_limits, compiled)
+        self._tasks_contact = (soft + (contact_task,), params, compiled)
+        self._imp_k, self._imp_d = contact_task.gains()
+
+    def set_contact(self, in_contact: bool) -> None:
+        """Whether the robot is in contact this tick (the controller's :class:`ComplianceGate`): with a
+        ``contact_task``, the impedance tracks the reference in contact and the stiff position task in free space
+        (a soft spring whose force is capped cannot brake the arm's own momentum: measured, a pick's open hand fell
+        5-8 cm under its reference onto the belt). Without one, nothing changes."""
+        if self.contact_task is None or bool(in_contact) == self.in_contact:
+            return
+        self.in_contact = bool(in_contact)
+        self.tasks, self._params, self.impedance = self._tasks_contact if self.in_contact else self._tasks_free
 
     def _new_solver(self) -> osqp.OSQP:
         """An OSQP problem set up on the fixed sparsity patterns (~0.3 ms), with this QP's settings."""
@@ -186,6 +221,7 @@ class TaskSpaceQP:
         self.last_ddq = np.zeros(self.n) if ddq_start_rad_s2 is None else np.asarray(ddq_start_rad_s2, dtype=np.float64).copy()
         self.failures = self.solves = self.inaccurate = self.rate_clamps = self.rescues = 0
         self.last_ok = True
+        self.set_contact(False)
 
     def warm_up(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> None:
         """Run every path of :meth:`solve` once on this state, the rare ones too (DAQP's rescue in its three levels
@@ -195,6 +231,10 @@ class TaskSpaceQP:
         tau_was, ddq_was = self.tau_last, self.last_ddq
         self.tau_last, self.last_ddq = np.array(terms.h, dtype=np.float64), np.zeros(self.n)
         self.solve(terms, q_rad, dq_rad_s, ref)
+        if self.contact_task is not None:  # the contact set's kernel too: not loaded at the first touch of a run
+            self.set_contact(True)
+            self.solve(terms, q_rad, dq_rad_s, ref)
+            self.set_contact(False)
         self._rescue(terms, q_rad, dq_rad_s)
         self.fallback(terms, q_rad, dq_rad_s)
         state = self.state(terms, q_rad, dq_rad_s, ref)

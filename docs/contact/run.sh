@@ -17,9 +17,16 @@ for m in "static 0" "linear 0.2" "linear 0.4" "reversal 0.2" "jump 0.2"; do
   mt --task pick --target $1 --speed $2 --mode hybrid --grasp-reflex --json out/pick_${tag}_reflex.json > pick_${tag}_reflex.txt
 done
 mt --task insert --target static --speed 0 --clearance-mm 1.0 --mode open_loop hybrid --json out/insert_1mm.json > insert_static_1mm.txt
+# --compliance (rerun 2026-12-06 with the compliance gate: the impedance in contact, stiff tracking in free space;
+# compliance_always_on/ holds pick's runs with the impedance on throughout, at 8d1b73a, that found the fault it fixes)
 mt --task insert --target static --speed 0 --clearance-mm 1.0 --compliance --mode hybrid open_loop --json out/insert_1mm_c.json > insert_static_1mm_compliance.txt
+for m in "static 0" "linear 0.2" "linear 0.4" "reversal 0.2" "jump 0.2"; do
+  set -- $m; tag=$1_$2; [ "$1" = static ] && tag=static
+  mt --task pick --target $1 --speed $2 --compliance --mode open_loop hybrid --json out/pick_${tag}_compliance.json > pick_${tag}_compliance.txt
+done
 # the bins x clearance x noise x mode x compliance table (20 seeds a cell, seeds 1000-1019; 30-43 min on 2 workers;
-# rerun 2026-12-06 with --compliance on the QP's fast path, with insert_static_1mm_compliance.txt and bench_tasks)
+# rerun 2026-12-06 with --compliance on the QP's fast path, and again the same day with the compliance gate, with
+# insert_static_1mm_compliance.txt and bench_tasks)
 python -m scenarios.sweep --grid insert_table_grid.json --out out/insert_table --workers 2
 # the simulator's floor, and the real-time factor of each task in one run
 python -m scenarios.insert_floor --offset-mm 0.5 --tilt-deg 0.5 > insert_floor.txt

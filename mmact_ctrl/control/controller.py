@@ -30,6 +30,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M, ChunkStage
 from mmact_ctrl.control.capture_gate import CaptureGate
 from mmact_ctrl.control.closing_gate import ClosingGate
+from mmact_ctrl.control.compliance_gate import ComplianceGate
 from mmact_ctrl.control.descent import DescentGovernor
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
@@ -48,14 +49,14 @@ CONTACT_LATCH_N = 3.0
 
 
 def make_qp(config: StackConfig) -> TaskSpaceQP:
-    """The 1 kHz QP: the default tasks (the compiled fast path), or with ``config.compliance`` the impedance task in
-    place of the stiff TCP position task (``controllers.qp.impedance``; its force capped at 2/3 of the contact-force
-    limit, so that the spring and the damper together stay under it)."""
+    """The 1 kHz QP: the default tasks (the compiled fast path), and with ``config.compliance`` the impedance task
+    that takes the stiff TCP position task's place while the robot is in contact (``controllers.qp.impedance``; its
+    force capped at 2/3 of the contact-force limit, so that the spring and the damper together stay under it; the
+    controller's :class:`ComplianceGate` says when)."""
     qp_config = replace(config.qp, dt_s=config.dt_s)
     if not config.compliance:
         return TaskSpaceQP(qp_config)
-    stiff_off = replace(qp_config, tcp=replace(qp_config.tcp, w_pos=0.0))
-    return TaskSpaceQP(stiff_off, extra_tasks=(ImpedanceTask(force_max_n=config.contact_force_limit_n * 2.0 / 3.0),))
+    return TaskSpaceQP(qp_config, contact_task=ImpedanceTask(force_max_n=config.contact_force_limit_n * 2.0 / 3.0))
 
 
 class HybridController:
@@ -89,6 +90,8 @@ class HybridController:
                                 in_hand=self._object_in_hand)
         self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
         self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m)
+        #: ``--compliance``: the impedance in contact, stiff tracking in free space (None: stiff throughout)
+        self.compliance = ComplianceGate(CONTACT_LATCH_N, config.dt_s) if config.compliance else None
         self.floor = FloorClamp(config.tcp_floor_m)
         self.reflex = GraspReflex(config.grasp_reflex)
         self.closing_gate = ClosingGate(config.close_below_m, config.dt_s)
@@ -210,6 +213,8 @@ class HybridController:
         self._force_n = 0.0
         self.chunk.touching = False
         self.force_guard.reset()
+        if self.compliance is not None:
+            self.compliance.reset()  # and the QP's reset below puts it in free space
         self.chunk.reset(pos, rotvec, gripper_m)
         self.floor.clamps = 0
         self.reflex.reset()
@@ -354,6 +359,8 @@ class HybridController:
         self._force_n = float(np.linalg.norm(force))
         self.chunk.touching = self._force_n > CONTACT_LATCH_N
         self.force_guard.update(force)
+        if self.compliance is not None:  # the impedance's turn in the QP, or the stiff position task's
+            self.qp.set_contact(self.compliance.update(self._force_n))
 
     def _estimate_view(self):
         """What the executors read of the target estimate: the estimator, or its predictions reflected at the walls of
