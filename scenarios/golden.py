@@ -18,6 +18,9 @@ with the reason (none is at the time of writing: the shipped policy and the expe
 The hashes are those of one machine and one set of library versions (the record says which: ``made_with``); a
 different CPU or a different numpy / MuJoCo / OSQP / torch may legitimately move the last bits. OpenBLAS's kernel,
 which follows the CPU, is pinned (``scenarios.blas``: the command re-executes itself with ``OPENBLAS_CORETYPE``).
+What no variable pins (the policy's episodes on an Intel Xeon against an AMD EPYC) is kept apart: each CPU model has
+its own record beside the default one (``record.<cpu>.json``, :func:`scenarios.golden_record.host_record_path`), and
+without a PATH ``--write`` and ``--check`` use this host's.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from scenarios.blas import PINNED_CORETYPE, VARIABLE, pin_blas_kernel
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.golden_record import (DEFAULT_PATHS, DEADLINE_ORDER, FORMAT, LIBRARIES, PROG, SIMULATED_ORDER,  # noqa: F401
                                      SEEDS, SOURCES, TARGETS, WALL_CLOCK_KEYS, Difference, compare, compare_episode,
-                                     format_report, load_record, made_with, make_record)
+                                     format_report, host_record_path, load_record, made_with, make_record)
 
 @dataclass(frozen=True)
 class Cell:
@@ -286,7 +289,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"note: {VARIABLE} is not {PINNED_CORETYPE}: OpenBLAS runs the host's own kernels and the last bits may "
               f"differ from the record's (scenarios.blas)", file=sys.stderr)
     text = args.write if args.write is not None else args.check
-    path = Path(text) if text else DEFAULT_PATHS[args.subset]
+    path = Path(text) if text else host_record_path(DEFAULT_PATHS[args.subset])
+    if args.check is not None and not text and not path.exists():
+        path = DEFAULT_PATHS[args.subset]  # no record of this host's CPU yet: the default one (its note says so)
     if args.write is not None:
         cells = SUBSETS[args.subset]()
         record = make_record(args.subset, cells, run_cells(cells, args.jobs, not args.quiet))

@@ -7,6 +7,7 @@ import dataclasses
 import importlib.metadata
 import json
 import platform
+import re
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,6 +67,25 @@ def make_record(subset: str, cells: tuple, episodes: dict[str, dict]) -> dict:
     return {"format": FORMAT, "subset": subset, "made_with": made_with(),
             "dropped_figures": sorted(WALL_CLOCK_KEYS),
             "cells": [dataclasses.asdict(c) for c in cells], "episodes": episodes}
+
+
+def host_record_path(path: Path, cpu_model: str | None = None) -> Path:
+    """The record for this host's CPU beside ``path``: ``path`` itself when it was made on this CPU model (or does not
+    exist yet), else its sibling named for the CPU (``record_ci.json`` -> ``record_ci.<cpu>.json``). A CPU can move the
+    last bits where no variable pins them (measured 2026-12-06: the CI subset's three policy episodes differ between
+    an AMD EPYC and an Intel Xeon with OpenBLAS pinned, MKL's and oneDNN's ISA pinned, numpy's AVX-512 paths off and
+    llvmpipe at 256 bits; the expert's episodes agree), so each kind of host keeps its own record, and a change is
+    checked against the record of the host it runs on."""
+    path = Path(path)
+    cpu = made_with()["cpu_model"] if cpu_model is None else cpu_model
+    try:
+        own = json.loads(path.read_text()).get("made_with", {}).get("cpu_model") == cpu
+    except (OSError, ValueError, AttributeError):
+        own = True  # absent or unreadable: the path as given (load_record says what is wrong)
+    if own or not cpu:
+        return path
+    slug = re.sub(r"[^a-z0-9]+", "-", cpu.lower()).strip("-")
+    return path.with_name(f"{path.stem}.{slug}{path.suffix}")
 
 
 def load_record(path: Path) -> dict:

@@ -10,7 +10,9 @@ import pytest
 
 from scenarios import golden
 
-RECORD_CI = Path(__file__).parent / "golden" / "record_ci.json"
+DEFAULT_CI = Path(__file__).parent / "golden" / "record_ci.json"
+#: this host's CPU's record where it has one (``golden.host_record_path``), else the default one
+RECORD_CI = golden.host_record_path(DEFAULT_CI) if golden.host_record_path(DEFAULT_CI).exists() else DEFAULT_CI
 
 
 @pytest.fixture(scope="module")
@@ -93,3 +95,11 @@ def test_bad_arguments_are_one_line_and_exit_2(capsys, one_line_exit_2):
     with pytest.raises(SystemExit) as exc:
         golden.main(["--check", "--jobs", "0"])
     one_line_exit_2(exc.value.code, capsys.readouterr().err, "--jobs")
+
+
+def test_each_cpu_model_checks_against_its_own_record(tmp_path):
+    path = tmp_path / "record_ci.json"
+    assert golden.host_record_path(path, "AMD EPYC") == path  # no record yet: the default path
+    path.write_text(json.dumps({"made_with": {"cpu_model": "AMD EPYC"}}))
+    assert golden.host_record_path(path, "AMD EPYC") == path
+    assert golden.host_record_path(path, "Intel(R) Xeon(R) Processor") == tmp_path / "record_ci.intel-r-xeon-r-processor.json"

@@ -3,6 +3,8 @@
 set -e
 # the floor beside our tick and mink's solve_ik (rerun 2026-12-05 afternoon after the command path's diet), on the main job's episode (our policy) and on the expert's
 python -m mmact_ctrl.bench --floor --json floor_policy.json > floor_policy.txt
+# the same on the other hosts of 2026-12-06 (an AMD EPYC, then an Intel Xeon in the evening): floor_policy_2026-12-06*.txt
+# python -m mmact_ctrl.bench --floor --json floor_policy_2026-12-06_xeon.json > floor_policy_2026-12-06_xeon.txt
 python -m mmact_ctrl.bench --floor --floor-args "--source expert" --json floor_expert.json > floor_expert.txt
 # the main job's real-time factor as the issue measured it
 python -m scenarios.moving_target --mode hybrid --target linear --episodes 3 --seed 3 --json out/main_job.json

@@ -5,9 +5,9 @@ the contact-force limit: in contact that is what keeps the force under the limit
 most force the arm may use to move its own inertia, and a soft spring is slow: measured on pick (``--compliance``,
 open loop, seeds 1000-1049), an open hand descending at 0.3-0.5 m/s when the chunk's reference turned back up fell
 5-8 cm under that reference onto the belt (about 2 m/s^2 of braking is all 20 N buys the arm), was dragged by it for
-seconds, and the arm went past its joint position and velocity limits (1,000-3,000 ticks a run) with contact forces
-to 460 N. So the QP tracks stiffly until a contact is measured (the external force at the TCP over
-``threshold_n``, the chunk's latch), switches the position task for the impedance
+seconds, and in 10 of 250 episodes the arm went past its joint position or velocity limits (up to 2,416 ticks a
+run), with contact forces to 460 N. So the QP tracks stiffly until a contact is measured (the external force at the
+TCP over ``threshold_n``, the chunk's latch), switches the position task for the impedance
 (:meth:`controllers.qp.TaskSpaceQP.set_contact`), and switches back once the force has stayed under the threshold for
 ``HOLD_S``, so a contact that chatters at its threshold does not switch the tasks tick by tick. A world that measures
 no wrench (reach) is never in contact: its QP stays stiff.
