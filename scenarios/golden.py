@@ -37,7 +37,8 @@ from scenarios.blas import PINNED_CORETYPE, VARIABLE, pin_blas_kernel
 from scenarios.cli import HelpFormatter, OneLineErrorParser
 from scenarios.golden_record import (DEFAULT_PATHS, DEADLINE_ORDER, FORMAT, LIBRARIES, PROG, SIMULATED_ORDER,  # noqa: F401
                                      SEEDS, SOURCES, TARGETS, WALL_CLOCK_KEYS, Difference, compare, compare_episode,
-                                     format_report, host_record_path, load_record, made_with, make_record)
+                                     format_report, host_record_path, load_record, made_with, make_record,
+                                     record_to_check)
 
 @dataclass(frozen=True)
 class Cell:
@@ -289,9 +290,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"note: {VARIABLE} is not {PINNED_CORETYPE}: OpenBLAS runs the host's own kernels and the last bits may "
               f"differ from the record's (scenarios.blas)", file=sys.stderr)
     text = args.write if args.write is not None else args.check
-    path = Path(text) if text else host_record_path(DEFAULT_PATHS[args.subset])
-    if args.check is not None and not text and not path.exists():
-        path = DEFAULT_PATHS[args.subset]  # no record of this host's CPU yet: the default one (its note says so)
+    default = DEFAULT_PATHS[args.subset]
+    if text:
+        path = Path(text)
+    else:  # this host's CPU's record: written beside the default one, checked against it where it exists
+        path = host_record_path(default) if args.write is not None else record_to_check(default)
     if args.write is not None:
         cells = SUBSETS[args.subset]()
         record = make_record(args.subset, cells, run_cells(cells, args.jobs, not args.quiet))

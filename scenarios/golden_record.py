@@ -88,6 +88,13 @@ def host_record_path(path: Path, cpu_model: str | None = None) -> Path:
     return path.with_name(f"{path.stem}.{slug}{path.suffix}")
 
 
+def record_to_check(path: Path) -> Path:
+    """The record a check on this host compares with: its CPU's (:func:`host_record_path`) where there is one, else
+    ``path`` (the report's note then says the record was made elsewhere)."""
+    own = host_record_path(path)
+    return own if own.exists() else Path(path)
+
+
 def load_record(path: Path) -> dict:
     """The record at ``path``; ValueError (one line) when it is missing or malformed."""
     try:

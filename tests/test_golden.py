@@ -10,9 +10,8 @@ import pytest
 
 from scenarios import golden
 
-DEFAULT_CI = Path(__file__).parent / "golden" / "record_ci.json"
 #: this host's CPU's record where it has one (``golden.host_record_path``), else the default one
-RECORD_CI = golden.host_record_path(DEFAULT_CI) if golden.host_record_path(DEFAULT_CI).exists() else DEFAULT_CI
+RECORD_CI = golden.record_to_check(Path(__file__).parent / "golden" / "record_ci.json")
 
 
 @pytest.fixture(scope="module")
