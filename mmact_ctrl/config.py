@@ -13,6 +13,7 @@ from controllers.retarget import RetargetConfig
 from controllers.smoother import SmootherConfig
 from controllers.target_estimator import EstimatorConfig
 
+from mmact_ctrl.control.force_guard import YIELD_M_S_PER_N
 from mmact_ctrl.executors.registry import MODES, check_mode
 
 #: the built-in ways of executing chunks (``mmact_ctrl.executors.registry.MODES``: baselines first, ours last); the
@@ -73,6 +74,8 @@ class StackConfig:
             different ticks (together they made the slowest ticks); 0 in simulated time keeps the published results.
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
+        guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
+            m/s/N (``mmact_ctrl.control.force_guard``); pick sets 3x the default.
         target_box_m: (low, high) corners of the box the target's carrier keeps it in (a contact task's conveyor or
             fixture rail), m; the fast layer's predictions are reflected at its walls, as the task's chunk source's
             lead is (``controllers.estimation.box``). None (reach): unbounded, as published.
@@ -118,6 +121,7 @@ class StackConfig:
     mpc_phase_s: float = 0.0
     residual_checkpoint: str = ""
     contact_force_limit_n: float = 30.0
+    guard_yield_m_s_per_n: float = YIELD_M_S_PER_N
     grasp_reflex: bool = False
     compliance: bool = False
     close_below_m: float | None = None
@@ -160,6 +164,8 @@ class StackConfig:
             raise ValueError(f"splice_radius_m must be > 0, got {self.splice_radius_m}")
         if not (math.isfinite(self.contact_force_limit_n) and self.contact_force_limit_n > 0):
             raise ValueError(f"contact_force_limit_n must be a force > 0 N, got {self.contact_force_limit_n}")
+        if not (math.isfinite(self.guard_yield_m_s_per_n) and self.guard_yield_m_s_per_n > 0):
+            raise ValueError(f"guard_yield_m_s_per_n must be a rate > 0 m/s/N, got {self.guard_yield_m_s_per_n}")
         if self.close_below_m is not None and not math.isfinite(self.close_below_m):
             raise ValueError(f"close_below_m must be a finite height in m or None, got {self.close_below_m}")
         if self.descent_band_m is not None:

@@ -12,7 +12,7 @@ from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.capture_gate import HYSTERESIS_M, RISE_M_S, CaptureGate
 from mmact_ctrl.control.closing_gate import HOLD_S, ClosingGate
 from mmact_ctrl.control.descent import BRAKE_M_S2, DescentGovernor
-from mmact_ctrl.control.force_guard import ContactForceGuard
+from mmact_ctrl.control.force_guard import GUARD_FRACTION, YIELD_M_S_PER_N, ContactForceGuard
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
@@ -84,6 +84,16 @@ def test_the_force_guard_stops_the_reference_going_into_the_contact():
     assert v[2] == 0.2  # away from the contact: unchanged
     g.update(np.zeros(3))
     assert g.halt(vel, acc)[0] is vel  # released: unchanged
+
+
+@pytest.mark.parametrize("rate", [YIELD_M_S_PER_N, 3.0 * YIELD_M_S_PER_N])
+def test_the_force_guard_yields_along_the_force_at_its_rate_per_newton_over_the_threshold(rate):
+    g = ContactForceGuard(limit_n=30.0, dt_s=DT, yield_m_s_per_n=rate)
+    for _ in range(50):
+        g.update(np.array([0.0, 0.0, 40.0]))  # pressed from below, 25 N over the threshold
+    over_n = 40.0 - GUARD_FRACTION * 30.0
+    assert g.offset_m[:2].tolist() == [0.0, 0.0] and g.offset_m[2] == pytest.approx(50 * DT * rate * over_n)
+    assert g.apply(np.array([0.5, 0.0, 0.1]))[2] == pytest.approx(0.1 + 50 * DT * rate * over_n)
 
 
 def test_the_capture_gate_keeps_the_open_hand_over_an_object_that_would_not_pass_between_the_fingers():
@@ -165,6 +175,10 @@ def test_the_pick_task_asks_for_its_guards_and_reach_for_none():
     assert task_stack_settings("reach") == {}
     assert "descent_band_m" not in task_stack_settings("insert") and "mpc" not in task_stack_settings("insert")
     assert "capture_tol_m" not in task_stack_settings("insert")
+    assert s["guard_yield_m_s_per_n"] == PickTask.guard_yield_m_s_per_n == 3.0 * YIELD_M_S_PER_N
+    assert "guard_yield_m_s_per_n" not in task_stack_settings("insert")  # insert's guard as its figures were made
+    with pytest.raises(ValueError, match="guard_yield_m_s_per_n"):
+        StackConfig(guard_yield_m_s_per_n=0.0)
     with pytest.raises(ValueError, match="descent_band_m"):
         StackConfig(descent_band_m=(0.06, 0.05))
     with pytest.raises(ValueError, match="capture_tol_m"):
@@ -203,6 +217,29 @@ def test_the_hand_no_longer_dives_into_the_belt_at_a_carriers_turn(seed):
     assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m
     # the reference is held on the floor; the tracked TCP stays within a few mm of it (fingertips 1 cm over the belt)
     assert log.ee_pos_m[:, 2].min() > PickTask.tcp_floor_m - 0.005
+
+
+def test_an_open_finger_dragged_on_a_cube_no_longer_winds_the_arm_past_its_joint_limits():
+    """Pick, reversal at 0.2 m/s, open loop, tuning seed 6033: an open finger landed on the other cube at 0.3 m/s and
+    rode it on the belt, pressed on at 35-50 N; with the guard yielding at the default rate the arm wound up past its
+    joint velocity (200 ticks) and position (62) limits at 5.6 s. Pick's guard yields 3x faster."""
+    from scenarios.moving_target import make_sensor, make_source_and_world
+    from scenarios.moving_target_args import build_parser, stack_config
+
+    args = build_parser().parse_args(["--source", "expert", "--task", "pick", "--target", "reversal", "--speed", "0.2",
+                                      "--duration-s", "6", "--episodes", "1", "--seed", "6033"])
+    cfg = stack_config(args, "open_loop")
+    assert cfg.guard_yield_m_s_per_n == PickTask.guard_yield_m_s_per_n
+    source, world = make_source_and_world(args)
+    ctl = HybridController(cfg)
+    try:
+        log = run_episode(world, source, ctl, seed=6033, sensor=make_sensor(args, world, cfg.dt_s))
+    finally:
+        world.close()
+    m = episode_metrics(log)
+    assert ctl.force_guard.yield_ticks > 0  # the finger pressed on the cube and the guard yielded
+    assert m["position_violations"] == 0 and m["velocity_violations"] == 0, m
+    assert m["limit_violations"] == m["contact_force_violations"], m
 
 
 @pytest.mark.parametrize("target,speed,seed,duration_s", [("reversal", "0.2", 1018, "3"), ("linear", "0.4", 1032, "5")])

@@ -2,6 +2,7 @@
 # Issue 32's figures (pick: rerun 2026-12-06 with the guarded descent: the descent governor, the closing gate, the guard's halt,
 # the MPC's height weight (the 2026-12-04 run before it: README, Contact); the pick lines and pick's fault suite rerun again the same day
 # with the capture gate, the force guard after the closing gate's hold, and the carrier jumping with both cubes;
+# the pick lines (stiff, reflex, compliance) rerun again late that day with pick's force guard yielding 3x faster;
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
@@ -28,8 +29,9 @@ done
 # rerun 2026-12-06 with --compliance on the QP's fast path, and again the same day with the compliance gate, with
 # insert_static_1mm_compliance.txt and bench_tasks)
 python -m scenarios.sweep --grid insert_table_grid.json --out out/insert_table --workers 2
-# the simulator's floor, and the real-time factor of each task in one run
+# the simulator's floors (insert's clearance, pick's landing speed), and the real-time factor of each task in one run
 python -m scenarios.insert_floor --offset-mm 0.5 --tilt-deg 0.5 > insert_floor.txt
+python -m scenarios.landing_floor > landing_floor.txt
 python -m scenarios.bench_tasks --episodes 5 --json bench_tasks.json > bench_tasks.txt
 # the fault suite on each task
 python -m scenarios.faults --quick --task pick --out out/faults_pick

@@ -89,7 +89,8 @@ class HybridController:
         self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
                                 in_hand=self._object_in_hand)
         self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
-        self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m)
+        self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m,
+                                             config.guard_yield_m_s_per_n)
         #: ``--compliance``: the impedance in contact, stiff tracking in free space (None: stiff throughout)
         self.compliance = ComplianceGate(CONTACT_LATCH_N, config.dt_s) if config.compliance else None
         self.floor = FloorClamp(config.tcp_floor_m)

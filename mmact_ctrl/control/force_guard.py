@@ -6,7 +6,8 @@ about 40 N a second. libfranka stops the arm when its collision thresholds are c
 so a command that drives the force over ``StackConfig.contact_force_limit_n`` is one the robot would reject. The guard
 is an admittance on the reference, from the measured external force at the TCP (``RobotState.wrench_ext``, libfranka's
 ``O_F_ext_hat_K``): above ``GUARD_FRACTION`` of the limit the reference yields along the measured force at
-``YIELD_M_S_PER_N`` per newton over; below it the yield relaxes back with ``RELAX_TAU_S``. In a guarded descent
+``yield_m_s_per_n`` per newton over (``StackConfig.guard_yield_m_s_per_n``: ``YIELD_M_S_PER_N`` by default, pick
+3x faster); below it the yield relaxes back with ``RELAX_TAU_S``. In a guarded descent
 (``StackConfig.descent_band_m``: pick), while the force is over the threshold the reference also stops advancing into
 the contact (:meth:`ContactForceGuard.halt`): its velocity and acceleration toward the obstacle (against the measured
 force) are removed, as a guarded move stops on contact; without that the tracking's damping alone (``kd_pos`` 40/s
@@ -21,8 +22,10 @@ import numpy as np
 
 #: the guard acts above this fraction of the contact-force limit
 GUARD_FRACTION = 0.5
-#: how fast the reference yields per newton over the guard's threshold, m/s/N (arm stiffness about 1000 N/m: a loop
-#: time constant near 0.1 s)
+#: how fast the reference yields per newton over the guard's threshold by default, m/s/N (arm stiffness about
+#: 1000 N/m: a loop time constant near 0.1 s). Pick yields 3x faster (``scenarios.world.tasks.pick``): with this rate
+#: an open finger that landed on a cube riding the belt was pressed on and dragged along for 0.3 s, and the arm wound
+#: up past its joint velocity and position limits (tuning seed 6033, reversal, open loop: 200 and 62 ticks)
 YIELD_M_S_PER_N = 0.01
 #: the yield relaxes back with this time constant once the force is under the threshold, s
 RELAX_TAU_S = 0.5
@@ -33,9 +36,12 @@ MAX_YIELD_M = 0.05
 class ContactForceGuard:
     """See the module. ``offset_m`` is the reference's current yield (world frame, m)."""
 
-    def __init__(self, limit_n: float, dt_s: float, floor_m: float = -np.inf) -> None:
+    def __init__(self, limit_n: float, dt_s: float, floor_m: float = -np.inf,
+                 yield_m_s_per_n: float = YIELD_M_S_PER_N) -> None:
         self.threshold_n = GUARD_FRACTION * float(limit_n)
         self.dt_s = float(dt_s)
+        #: how fast the reference yields per newton over the threshold, m/s/N
+        self.yield_m_s_per_n = float(yield_m_s_per_n)
         #: the yield never takes the reference below the TCP floor (``StackConfig.tcp_floor_m``), m: a force that
         #: pulls the hand down (a held cube dragged by the belt) must not drive it into the table
         self.floor_m = float(floor_m)
@@ -56,7 +62,7 @@ class ContactForceGuard:
         norm = float(np.linalg.norm(f))
         if norm > self.threshold_n:
             self.normal = f / norm
-            self.offset_m = self.offset_m + self.dt_s * YIELD_M_S_PER_N * (norm - self.threshold_n) * self.normal
+            self.offset_m = self.offset_m + self.dt_s * self.yield_m_s_per_n * (norm - self.threshold_n) * self.normal
             n = float(np.linalg.norm(self.offset_m))
             if n > MAX_YIELD_M:
                 self.offset_m *= MAX_YIELD_M / n

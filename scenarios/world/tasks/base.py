@@ -29,6 +29,8 @@ class Task(Protocol):
             (``StackConfig.capture_clear_m``; read only with ``capture_tol_m``).
         mpc_z_weight: the MPC's weight on the vertical position error relative to the horizontal
             (``controllers.mpc.MPCConfig.w_pos_z_scale``; 1: alike).
+        guard_yield_m_s_per_n: how fast the contact-force guard yields per newton over its threshold
+            (``StackConfig.guard_yield_m_s_per_n``), m/s/N.
     """
 
     name: str
@@ -41,6 +43,7 @@ class Task(Protocol):
     capture_tol_m: float | None
     capture_clear_m: float
     mpc_z_weight: float
+    guard_yield_m_s_per_n: float
 
     def add_to_scene(self, spec, config) -> None:
         """Add the task's bodies, pads and contact settings to the MjSpec of the Panda scene."""

@@ -4,6 +4,7 @@ bodies without collision (``scenarios.world.panda_scene``), the metrics are ``mm
 
 from __future__ import annotations
 
+from mmact_ctrl.control.force_guard import YIELD_M_S_PER_N
 from scenarios.world.sim_world import SimWorld
 from scenarios.world.targets import TargetSpec, target_spec
 
@@ -24,6 +25,7 @@ class ReachTask:
     capture_tol_m = None
     capture_clear_m = 0.0
     mpc_z_weight = 1.0
+    guard_yield_m_s_per_n = YIELD_M_S_PER_N
     #: SceneConfig fields the task sets (none: reach's scene is the base scene)
     scene_overrides: dict = {}
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib
 
+from mmact_ctrl.control.force_guard import YIELD_M_S_PER_N
+
 #: every task, by name: ``module:class``
 TASK_PATHS: dict[str, str] = {
     "reach": "scenarios.world.tasks.reach:ReachTask",
@@ -47,6 +49,8 @@ def task_guard_settings(task) -> dict:
         out["descent_band_m"] = tuple(float(z) for z in task.descent_band_m)
     if task.close_below_m is not None:
         out["close_below_m"] = float(task.close_below_m)
+    if task.guard_yield_m_s_per_n != YIELD_M_S_PER_N:
+        out["guard_yield_m_s_per_n"] = float(task.guard_yield_m_s_per_n)
     if getattr(task, "capture_tol_m", None) is not None:
         out["capture_tol_m"] = float(task.capture_tol_m)
         out["capture_clear_m"] = float(task.capture_clear_m)
