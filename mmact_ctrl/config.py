@@ -75,7 +75,7 @@ class StackConfig:
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
         guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
-            m/s/N (``mmact_ctrl.control.force_guard``); pick sets 3x the default.
+            m/s/N (``mmact_ctrl.control.force_guard``); a task's settings may ask for a faster one.
         target_box_m: (low, high) corners of the box the target's carrier keeps it in (a contact task's conveyor or
             fixture rail), m; the fast layer's predictions are reflected at its walls, as the task's chunk source's
             lead is (``controllers.estimation.box``). None (reach): unbounded, as published.

@@ -6,8 +6,8 @@ about 40 N a second. libfranka stops the arm when its collision thresholds are c
 so a command that drives the force over ``StackConfig.contact_force_limit_n`` is one the robot would reject. The guard
 is an admittance on the reference, from the measured external force at the TCP (``RobotState.wrench_ext``, libfranka's
 ``O_F_ext_hat_K``): above ``GUARD_FRACTION`` of the limit the reference yields along the measured force at
-``yield_m_s_per_n`` per newton over (``StackConfig.guard_yield_m_s_per_n``: ``YIELD_M_S_PER_N`` by default, pick
-3x faster); below it the yield relaxes back with ``RELAX_TAU_S``. In a guarded descent
+``yield_m_s_per_n`` per newton over (``StackConfig.guard_yield_m_s_per_n``: ``YIELD_M_S_PER_N`` unless the task's
+settings ask for a faster one); below it the yield relaxes back with ``RELAX_TAU_S``. In a guarded descent
 (``StackConfig.descent_band_m``: pick), while the force is over the threshold the reference also stops advancing into
 the contact (:meth:`ContactForceGuard.halt`): its velocity and acceleration toward the obstacle (against the measured
 force) are removed, as a guarded move stops on contact; without that the tracking's damping alone (``kd_pos`` 40/s
@@ -23,9 +23,9 @@ import numpy as np
 #: the guard acts above this fraction of the contact-force limit
 GUARD_FRACTION = 0.5
 #: how fast the reference yields per newton over the guard's threshold by default, m/s/N (arm stiffness about
-#: 1000 N/m: a loop time constant near 0.1 s). Pick yields 3x faster (``scenarios.world.tasks.pick``): with this rate
-#: an open finger that landed on a cube riding the belt was pressed on and dragged along for 0.3 s, and the arm wound
-#: up past its joint velocity and position limits (tuning seed 6033, reversal, open loop: 200 and 62 ticks)
+#: 1000 N/m: a loop time constant near 0.1 s). A task may ask for a faster rate (``StackConfig.guard_yield_m_s_per_n``):
+#: at this one an open finger pressed on an object that a conveyor drags along was dragged with it for 0.3 s, and the
+#: arm wound up past its joint velocity and position limits (the task's settings say where and how it was measured)
 YIELD_M_S_PER_N = 0.01
 #: the yield relaxes back with this time constant once the force is under the threshold, s
 RELAX_TAU_S = 0.5
