@@ -200,7 +200,8 @@ class PickTask:
     #: the force guard yields 3x faster than by default (``StackConfig.guard_yield_m_s_per_n``): at the default an
     #: open finger that landed on a cube riding the belt was pressed on and dragged for 0.3 s, and the arm wound up past
     #: its joint velocity and position limits (tuning seeds 6000-6049, reversal 0.2 m/s, open loop: 262 ticks in one
-    #: episode; none at 3x, picks and episodes over 30 N unchanged in open loop and hybrid on four motions)
+    #: episode; none at 3x; in open loop and hybrid at 0.4 m/s, reversal and jump the picks and the episodes over
+    #: 30 N unchanged, but for one hybrid pick more on the reversal)
     guard_yield_m_s_per_n = 3.0 * YIELD_M_S_PER_N
     world_class = PickWorld
 

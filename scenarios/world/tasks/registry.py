@@ -38,8 +38,9 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
 
 
 def task_guard_settings(task) -> dict:
-    """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``)
-    as ``StackConfig`` settings; none for a task without them (reach, insert: their stacks as published)."""
+    """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``,
+    ``Task.guard_yield_m_s_per_n`` where it is not the default) as ``StackConfig`` settings; none for a task without
+    them (reach, insert: their stacks as published)."""
     out = {}
     if task.mpc_z_weight != 1.0:
         from controllers.mpc import MPCConfig
