@@ -5,6 +5,7 @@ set -e
 python -m mmact_ctrl.bench --floor --json floor_policy.json > floor_policy.txt
 # the same on the other hosts of 2026-12-06 (an AMD EPYC, then an Intel Xeon in the evening): floor_policy_2026-12-06*.txt
 # python -m mmact_ctrl.bench --floor --json floor_policy_2026-12-06_xeon.json > floor_policy_2026-12-06_xeon.txt
+# and late that day again on an AMD EPYC host: floor_policy_2026-12-06_amd_late.txt (two more runs: tick/floor 2.64x, 2.62x)
 python -m mmact_ctrl.bench --floor --floor-args "--source expert" --json floor_expert.json > floor_expert.txt
 # the main job's real-time factor as the issue measured it
 python -m scenarios.moving_target --mode hybrid --target linear --episodes 3 --seed 3 --json out/main_job.json
