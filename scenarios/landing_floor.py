@@ -128,9 +128,8 @@ def land(speed_m_s: float, mode: str = "open_loop", compliance: bool = False, se
     """One landing at ``speed_m_s`` (see the module)."""
     world = _world()
     try:
-        world.reset(seed)
+        world.reset(seed)  # the source reads the reset scene's geometry; the episode resets it again
         source = LandingSource(world, speed_m_s)
-        world.reset(seed)
         duration_s = MOVE_S + HOLD_S + (HOVER_M + PRESS_M) / float(speed_m_s) + AFTER_S
         cfg = StackConfig(mode=mode, duration_s=duration_s, **task_stack_settings("pick", compliance=compliance))
         log = run_episode(world, source, HybridController(cfg), seed=seed)
