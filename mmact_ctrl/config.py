@@ -76,6 +76,9 @@ class StackConfig:
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
         guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
             m/s/N (``mmact_ctrl.control.force_guard``); a task's settings may ask for a faster one.
+        empty_hand_after_s: with a descent band, in a mode that reads the object: once the gripper has been closing
+            this long with the object's estimate not between the fingers, the closed hand rises where it is to the
+            band's top before it goes on (``mmact_ctrl.control.empty_hand``), s; None: no such gate.
         target_box_m: (low, high) corners of the box the target's carrier keeps it in (a contact task's conveyor or
             fixture rail), m; the fast layer's predictions are reflected at its walls, as the task's chunk source's
             lead is (``controllers.estimation.box``). None (reach): unbounded, as published.
@@ -122,6 +125,7 @@ class StackConfig:
     residual_checkpoint: str = ""
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N
+    empty_hand_after_s: float | None = None
     grasp_reflex: bool = False
     compliance: bool = False
     close_below_m: float | None = None
@@ -166,6 +170,9 @@ class StackConfig:
             raise ValueError(f"contact_force_limit_n must be a force > 0 N, got {self.contact_force_limit_n}")
         if not (math.isfinite(self.guard_yield_m_s_per_n) and self.guard_yield_m_s_per_n > 0):
             raise ValueError(f"guard_yield_m_s_per_n must be a rate > 0 m/s/N, got {self.guard_yield_m_s_per_n}")
+        if self.empty_hand_after_s is not None and not (math.isfinite(self.empty_hand_after_s)
+                                                        and self.empty_hand_after_s > 0):
+            raise ValueError(f"empty_hand_after_s must be a time > 0 s or None, got {self.empty_hand_after_s}")
         if self.close_below_m is not None and not math.isfinite(self.close_below_m):
             raise ValueError(f"close_below_m must be a finite height in m or None, got {self.close_below_m}")
         if self.descent_band_m is not None:

@@ -14,11 +14,11 @@ from mmact_ctrl.control.closing_gate import HOLD_S, ClosingGate
 from mmact_ctrl.control.descent import BRAKE_M_S2, DescentGovernor
 from mmact_ctrl.control.force_guard import GUARD_FRACTION, YIELD_M_S_PER_N, ContactForceGuard
 from mmact_ctrl.controller import HybridController
-from mmact_ctrl.loop import run_episode
 from mmact_ctrl.metrics import episode_metrics
 from scenarios.world.tasks.pick import (CAPTURE_CLEAR_M, CAPTURE_TOL_M, CLOSE_BELOW_M, CUBE_HALF_M, DESCENT_BAND_M,
                                         PickTask)
 from scenarios.world.tasks.registry import task_stack_settings
+from pick_episode import run_pick_episode
 
 DT = 0.001
 
@@ -202,17 +202,7 @@ def test_only_a_mode_that_reads_the_object_slows_in_the_band_and_every_mode_has_
 def test_the_hand_no_longer_dives_into_the_belt_at_a_carriers_turn(seed):
     """Pick at 0.4 m/s, hybrid, the main job's settings: on these seeds the MPC's plan, catching up after the cube
     turned at the belt's end, drove the TCP 14-16 mm under its floor and the open fingers into the belt (160 N, 122 N)."""
-    from scenarios.moving_target import make_sensor, make_source_and_world
-    from scenarios.moving_target_args import build_parser, stack_config
-
-    args = build_parser().parse_args(["--source", "expert", "--task", "pick", "--target", "linear", "--speed", "0.4",
-                                      "--duration-s", "4", "--episodes", "1", "--seed", str(seed)])
-    cfg = stack_config(args, "hybrid")
-    source, world = make_source_and_world(args)
-    try:
-        log = run_episode(world, source, HybridController(cfg), seed=seed, sensor=make_sensor(args, world, cfg.dt_s))
-    finally:
-        world.close()
+    log, _, _ = run_pick_episode("linear", "0.4", seed, "4")
     m = episode_metrics(log)
     assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m
     # the reference is held on the floor; the tracked TCP stays within a few mm of it (fingertips 1 cm over the belt)
@@ -223,19 +213,8 @@ def test_an_open_finger_dragged_on_a_cube_no_longer_winds_the_arm_past_its_joint
     """Pick, reversal at 0.2 m/s, open loop, tuning seed 6033: an open finger landed on the other cube at 0.3 m/s and
     rode it on the belt, pressed on at 35-50 N; with the guard yielding at the default rate the arm wound up past its
     joint velocity (200 ticks) and position (62) limits at 5.6 s. Pick's guard yields 3x faster."""
-    from scenarios.moving_target import make_sensor, make_source_and_world
-    from scenarios.moving_target_args import build_parser, stack_config
-
-    args = build_parser().parse_args(["--source", "expert", "--task", "pick", "--target", "reversal", "--speed", "0.2",
-                                      "--duration-s", "6", "--episodes", "1", "--seed", "6033"])
-    cfg = stack_config(args, "open_loop")
+    log, ctl, cfg = run_pick_episode("reversal", "0.2", 6033, "6", mode="open_loop")
     assert cfg.guard_yield_m_s_per_n == PickTask.guard_yield_m_s_per_n
-    source, world = make_source_and_world(args)
-    ctl = HybridController(cfg)
-    try:
-        log = run_episode(world, source, ctl, seed=6033, sensor=make_sensor(args, world, cfg.dt_s))
-    finally:
-        world.close()
     m = episode_metrics(log)
     assert ctl.force_guard.yield_ticks > 0  # the finger pressed on the cube and the guard yielded
     assert m["position_violations"] == 0 and m["velocity_violations"] == 0, m
@@ -247,18 +226,7 @@ def test_a_finger_no_longer_strikes_the_cube_beside_it(target, speed, seed, dura
     """Pick, hybrid, the main job's settings: on these seeds the hand, catching up, came down with the cube 2 cm off
     the fingers' axis, and a finger struck its side (50 N at the reversal's turn, 45 N at 0.4 m/s). The capture gate
     keeps the hand over the cubes' top until the cube will pass between the fingers."""
-    from scenarios.moving_target import make_sensor, make_source_and_world
-    from scenarios.moving_target_args import build_parser, stack_config
-
-    args = build_parser().parse_args(["--source", "expert", "--task", "pick", "--target", target, "--speed", speed,
-                                      "--duration-s", duration_s, "--episodes", "1", "--seed", str(seed)])
-    cfg = stack_config(args, "hybrid")
-    source, world = make_source_and_world(args)
-    ctl = HybridController(cfg)
-    try:
-        log = run_episode(world, source, ctl, seed=seed, sensor=make_sensor(args, world, cfg.dt_s))
-    finally:
-        world.close()
+    log, ctl, _ = run_pick_episode(target, speed, seed, duration_s)
     m = episode_metrics(log)
     assert ctl.capture.raised_ticks > 0  # the gate acted
     assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m

@@ -36,6 +36,7 @@ class ClosingGate:
     def reset(self) -> None:
         self.closing = False
         self.held_ticks = 0
+        self.closing_ticks = 0  # the ticks since the closing started (0 while open)
         self._hold_left = 0
         self._hold_z_m = np.inf
 
@@ -63,6 +64,7 @@ class ClosingGate:
             return gripper_cmd_m
         if gripper_cmd_m >= OPEN_FROM_M:  # open: the next closing is gated again
             self.closing = False
+            self.closing_ticks = 0
             return gripper_cmd_m
         if not self.closing and tcp_z_m > self.close_below_m:
             self.held_ticks += 1
@@ -70,4 +72,5 @@ class ClosingGate:
         if not self.closing:  # the closing starts: the hand stays down while the fingers close
             self._hold_left, self._hold_z_m = self.hold_ticks, np.inf
         self.closing = True
+        self.closing_ticks += 1
         return gripper_cmd_m

@@ -32,6 +32,7 @@ from mmact_ctrl.control.capture_gate import CaptureGate
 from mmact_ctrl.control.closing_gate import ClosingGate
 from mmact_ctrl.control.compliance_gate import ComplianceGate
 from mmact_ctrl.control.descent import DescentGovernor
+from mmact_ctrl.control.empty_hand import EmptyHandGate
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
 from mmact_ctrl.control.grasp_reflex import GraspReflex, reflex_refusal
@@ -102,6 +103,9 @@ class HybridController:
         self.capture = (CaptureGate(config.capture_tol_m, config.capture_clear_m, config.descent_band_m[1], config.dt_s)
                         if config.capture_tol_m is not None and config.descent_band_m is not None
                         and layers.reads_target else None)  # the hand over the object's top until it is between
+        self.empty_hand = (EmptyHandGate(config.empty_hand_after_s, config.descent_band_m[1], config.dt_s)
+                           if config.empty_hand_after_s is not None and config.descent_band_m is not None
+                           and config.close_below_m is not None and layers.reads_target else None)
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -224,6 +228,8 @@ class HybridController:
             self.descent.reset()
         if self.capture is not None:
             self.capture.reset()
+        if self.empty_hand is not None:
+            self.empty_hand.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -333,13 +339,16 @@ class HybridController:
         else:
             s = self.smoothed_reference(t_s)
             pos, vel, acc, q_post = s.pos_m, s.vel_m_s, s.acc_m_s2, self.q_post
-        obj = self._object_now(t_s) if self.reflex.enabled or self.capture is not None else None  # once a tick
+        obj = (self._object_now(t_s) if self.reflex.enabled or self.capture is not None or self.empty_hand is not None
+               else None)  # once a tick
         gripper_m = self.reflex(s.gripper_m, terms.pos_m, obj) if self.reflex.enabled else s.gripper_m
         if self.closing_gate.close_below_m is not None:  # not before the hand is down, no lift while closing
             gripper_m = self.closing_gate(gripper_m, float(terms.pos_m[2]))
             pos, vel, acc = self.closing_gate.hold(pos, vel, acc)
         if self.capture is not None:  # not down past the object's top unless it will pass between the fingers
             pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, obj)
+        if self.empty_hand is not None:  # a closing that found nothing: up before sideways
+            pos, vel, acc = self.empty_hand(pos, vel, acc, terms.pos_m, obj, self.closing_gate.closing_ticks)
         if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
             pos = self.force_guard.apply(pos)
             if self.descent is not None:  # a guarded move also stops going on into the contact

@@ -31,6 +31,9 @@ class Task(Protocol):
             (``controllers.mpc.MPCConfig.w_pos_z_scale``; 1: alike).
         guard_yield_m_s_per_n: how fast the contact-force guard yields per newton over its threshold
             (``StackConfig.guard_yield_m_s_per_n``), m/s/N.
+        empty_hand_after_s: a closing that has gone on this long with the object not between the fingers found
+            nothing: the closed hand rises before it goes on, in a mode that reads the object
+            (``StackConfig.empty_hand_after_s``), s; None: no such gate.
     """
 
     name: str
@@ -44,6 +47,7 @@ class Task(Protocol):
     capture_clear_m: float
     mpc_z_weight: float
     guard_yield_m_s_per_n: float
+    empty_hand_after_s: float | None
 
     def add_to_scene(self, spec, config) -> None:
         """Add the task's bodies, pads and contact settings to the MjSpec of the Panda scene."""

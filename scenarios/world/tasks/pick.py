@@ -43,6 +43,11 @@ CAPTURE_TOL_M = OPEN_PAD_INNER_M - CUBE_HALF_M - 0.0005
 #: across the fingers' axis a cube whose centre is farther off the TCP than this clears the fingers, m (a cube's
 #: half-width, a finger's half-width of about 1 cm, 4.5 mm to spare)
 CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045
+#: a closing that has gone on this long with the cube's estimate not between the fingers found nothing, s: the
+#: fingers close at ``grip.GRIPPER_SPEED_M_S`` (0.2 m/s together), 0.175 s from open onto a 4.5 cm cube, and are past
+#: its width by 0.25 s (``mmact_ctrl.control.empty_hand``). Measured on the tuning seeds (6000-6049, hybrid): at the
+#: closing's first tick it took the grasps that start with the cube 2-3 cm off (linear 0.2 m/s: 45 -> 17 picks)
+EMPTY_HAND_AFTER_S = 0.25
 #: the distractor starts this far from the instructed cube, m
 DISTRACTOR_GAP_M = (0.12, 0.2)
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -203,6 +208,11 @@ class PickTask:
     #: episode; none at 3x; in open loop and hybrid at 0.4 m/s, reversal and jump the picks and the episodes over
     #: 30 N unchanged, but for one hybrid pick more on the reversal)
     guard_yield_m_s_per_n = 3.0 * YIELD_M_S_PER_N
+    #: a closing that found nothing: the closed hand rises where it is before it goes on, in a mode that reads the
+    #: cube (``StackConfig.empty_hand_after_s``): the hybrid layer's correction swept a closed hand that had missed
+    #: into the cube at the grasp height (tuning seeds 6000-6049, hybrid: episodes over 30 N, reversal 6 -> 5, jump
+    #: 5 -> 2; picks unchanged on linear 0.2 and 0.4 m/s, reversal and jump)
+    empty_hand_after_s = EMPTY_HAND_AFTER_S
     world_class = PickWorld
 
     def add_to_scene(self, spec, config: SceneConfig) -> None:

@@ -26,6 +26,7 @@ class ReachTask:
     capture_clear_m = 0.0
     mpc_z_weight = 1.0
     guard_yield_m_s_per_n = YIELD_M_S_PER_N
+    empty_hand_after_s = None
     #: SceneConfig fields the task sets (none: reach's scene is the base scene)
     scene_overrides: dict = {}
 
