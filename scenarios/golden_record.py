@@ -88,9 +88,31 @@ def host_record_path(path: Path, cpu_model: str | None = None) -> Path:
     return path.with_name(f"{path.stem}.{slug}{path.suffix}")
 
 
+def cpu_isa() -> str:
+    """The widest vector instruction set this CPU offers (``avx512``, ``avx2`` or ``base``), from /proc/cpuinfo."""
+    flags = next((line.split(":", 1)[1].split() for line in _read_lines("/proc/cpuinfo") if line.startswith("flags")), [])
+    return "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else "base"
+
+
+def isa_record_path(path: Path, cpu_model: str | None = None, isa: str | None = None) -> Path:
+    """The record for this CPU model *and* vector instruction set beside ``path`` (``record_ci.json`` ->
+    ``record_ci.<cpu>.<isa>.json``): two hosts may report the same model name and still dispatch torch's kernels
+    differently (measured 2026-12-07: on an "AMD EPYC" without AVX-512 the 72 policy episodes of the full record
+    differ in their last bits from the "AMD EPYC" host the default record was made on, the code before and after the
+    day's change alike; the 73 expert episodes agree)."""
+    path = Path(path)
+    cpu = made_with()["cpu_model"] if cpu_model is None else cpu_model
+    slug = re.sub(r"[^a-z0-9]+", "-", (cpu or "cpu").lower()).strip("-")
+    return path.with_name(f"{path.stem}.{slug}.{isa or cpu_isa()}{path.suffix}")
+
+
 def record_to_check(path: Path) -> Path:
-    """The record a check on this host compares with: its CPU's (:func:`host_record_path`) where there is one, else
-    ``path`` (the report's note then says the record was made elsewhere)."""
+    """The record a check on this host compares with: its CPU model's and instruction set's
+    (:func:`isa_record_path`) where there is one, else its CPU model's (:func:`host_record_path`), else ``path``
+    (the report's note then says the record was made elsewhere)."""
+    fine = isa_record_path(path)
+    if fine.exists():
+        return fine
     own = host_record_path(path)
     return own if own.exists() else Path(path)
 

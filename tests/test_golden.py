@@ -102,3 +102,18 @@ def test_each_cpu_model_checks_against_its_own_record(tmp_path):
     path.write_text(json.dumps({"made_with": {"cpu_model": "AMD EPYC"}}))
     assert golden.host_record_path(path, "AMD EPYC") == path
     assert golden.host_record_path(path, "Intel(R) Xeon(R) Processor") == tmp_path / "record_ci.intel-r-xeon-r-processor.json"
+
+
+def test_a_host_with_the_same_model_name_and_another_instruction_set_checks_against_its_own_record(tmp_path,
+                                                                                                   monkeypatch):
+    from scenarios import golden_record
+
+    path = tmp_path / "record_ci.json"
+    path.write_text(json.dumps({"made_with": {"cpu_model": "AMD EPYC"}}))
+    fine = golden_record.isa_record_path(path, "AMD EPYC", "avx2")
+    assert fine == tmp_path / "record_ci.amd-epyc.avx2.json"
+    monkeypatch.setattr(golden_record, "isa_record_path", lambda p: golden_record.Path(p).with_name(fine.name))
+    monkeypatch.setattr(golden_record, "host_record_path", lambda p: golden_record.Path(p))
+    assert golden_record.record_to_check(path) == path  # no record for the instruction set yet: the model's
+    fine.write_text("{}")
+    assert golden_record.record_to_check(path) == fine
