@@ -21,8 +21,7 @@ import math
 
 import numpy as np
 
-#: how fast the held reference rises, m/s (the capture gate's rate)
-RISE_M_S = 0.15
+from mmact_ctrl.control.capture_gate import RISE_M_S  # the held reference rises at the capture gate's rate, m/s
 #: an object whose estimate is farther than this from the TCP horizontally is not between the closed fingers, m (a
 #: 4.5 cm cube held off-centre is within a centimetre or so; 2 mm sensing noise)
 BETWEEN_XY_M = 0.02
@@ -51,7 +50,7 @@ class EmptyHandGate:
         closed hand is empty and low (the same arrays otherwise). ``closing_ticks``: the ticks since the gripper
         started closing (0: open)."""
         if not self.active:
-            if closing_ticks < self.after_ticks or closing_ticks == 0:
+            if closing_ticks == 0 or closing_ticks < self.after_ticks:  # open, or the fingers not yet past the object
                 return pos_m, vel_m_s, acc_m_s2
             if object_pos_m is None or tcp_pos_m[2] >= self.safe_z_m:
                 return pos_m, vel_m_s, acc_m_s2
