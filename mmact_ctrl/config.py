@@ -79,6 +79,9 @@ class StackConfig:
         empty_hand_after_s: with a descent band, in a mode that reads the object: once the gripper has been closing
             this long with the object's estimate not between the fingers, the closed hand rises where it is to the
             band's top before it goes on (``mmact_ctrl.control.empty_hand``), s; None: no such gate.
+        empty_grip_below_m: with a descent band, in a mode that does not read the object: fingers commanded closed
+            and measured closer than this found nothing, and the hand rises to the band's top at once
+            (``mmact_ctrl.control.empty_grip``), m; None: no such gate.
         target_box_m: (low, high) corners of the box the target's carrier keeps it in (a contact task's conveyor or
             fixture rail), m; the fast layer's predictions are reflected at its walls, as the task's chunk source's
             lead is (``controllers.estimation.box``). None (reach): unbounded, as published.
@@ -92,6 +95,9 @@ class StackConfig:
             ``descent_speed_m_s`` in a mode that reads the object, and with it the TCP floor as a braking curve in
             every mode (``mmact_ctrl.control.descent``); None (reach, insert): no such stage.
         descent_speed_m_s: that speed, m/s.
+        landing_speed_m_s: with a descent band, in a mode that does not read the object: the band's speed there, m/s
+            (the hand cannot know whether something is under it, so it passes the objects' top no faster than a
+            landing stays under the contact-force limit: ``scenarios.landing_floor``); None: no band in those modes.
         capture_tol_m: with a descent band, in a mode that reads the object: the hand stays over the band while the
             object's estimate is off the fingers' axis by more than this, m (``mmact_ctrl.control.capture_gate``);
             None: no such gate.
@@ -126,11 +132,13 @@ class StackConfig:
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N
     empty_hand_after_s: float | None = None
+    empty_grip_below_m: float | None = None
     grasp_reflex: bool = False
     compliance: bool = False
     close_below_m: float | None = None
     descent_band_m: tuple[float, float] | None = None
     descent_speed_m_s: float = 0.05
+    landing_speed_m_s: float | None = None
     capture_tol_m: float | None = None
     capture_clear_m: float = 0.037
     target_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
@@ -186,6 +194,12 @@ class StackConfig:
             raise ValueError(f"capture_clear_m must be a distance >= 0 in m, got {self.capture_clear_m}")
         if not (math.isfinite(self.descent_speed_m_s) and self.descent_speed_m_s > 0):
             raise ValueError(f"descent_speed_m_s must be a speed > 0 m/s, got {self.descent_speed_m_s}")
+        if self.empty_grip_below_m is not None and not (math.isfinite(self.empty_grip_below_m)
+                                                        and self.empty_grip_below_m > 0):
+            raise ValueError(f"empty_grip_below_m must be an opening > 0 m or None, got {self.empty_grip_below_m}")
+        if self.landing_speed_m_s is not None and not (math.isfinite(self.landing_speed_m_s)
+                                                       and self.landing_speed_m_s > 0):
+            raise ValueError(f"landing_speed_m_s must be a speed > 0 m/s or None, got {self.landing_speed_m_s}")
         if not math.isfinite(self.tcp_floor_m):
             raise ValueError(f"tcp_floor_m must be a finite height in m, got {self.tcp_floor_m}")
         if self.mpc_plan_start not in ("measured", "tracked"):

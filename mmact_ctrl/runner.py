@@ -206,7 +206,7 @@ class EpisodeRunner(SourceQueries):
         self._state = self.world.state()
         if self._state.wrench_ext is not None:  # a contact task's world measures the wrench (reach's does not)
             self.contact.check(self._state.wrench_ext)
-            self.controller.sense_wrench(self._state.wrench_ext)
+            self.controller.sense_wrench(self._state.wrench_ext, self._state.gripper_m)
         s0 = time.perf_counter()
         try:
             arrived = self.sensor.poll(t)

@@ -7,7 +7,8 @@ over it with one finger's pad centred over the cube's top, holds, then comes str
 ``PRESS_M`` under the top and holds there. Per speed: the hand's measured speed when the fingertip reaches the cube's
 top, the peak force on the robot within ``SPIKE_WINDOW_S`` of the first touch (over ``TOUCH_N``), the ticks over the
 limit in the whole episode, and the peak's own. The modes are the ones that do not read the object (in those that
-do, the capture gate keeps an open hand off a cube that is not between its fingers, so nothing lands):
+do, the capture gate keeps an open hand off a cube that is not between its fingers, so nothing lands), without the
+band's landing speed that pick's stack sets from this measurement (``StackConfig.landing_speed_m_s``):
 
     python -m scenarios.landing_floor                              # open_loop, stiff and --compliance, a table
     python -m scenarios.landing_floor --speeds 0.05 0.1 --json out/landing.json
@@ -124,14 +125,20 @@ class LandingSource:
         return ActionChunk(waypoints=waypoints, dt_s=self.dt_s, t0_s=observation.t0_s)
 
 
-def land(speed_m_s: float, mode: str = "open_loop", compliance: bool = False, seed: int = 0) -> Landing:
-    """One landing at ``speed_m_s`` (see the module)."""
+def land(speed_m_s: float, mode: str = "open_loop", compliance: bool = False, seed: int = 0,
+         landing_speed: bool = False) -> Landing:
+    """One landing at ``speed_m_s`` (see the module): the simulator's own, the band's landing speed off
+    (``StackConfig.landing_speed_m_s``, which is set from this measurement); ``landing_speed``: with it, as pick's
+    stack runs."""
     world = _world()
     try:
         world.reset(seed)  # the source reads the reset scene's geometry; the episode resets it again
         source = LandingSource(world, speed_m_s)
         duration_s = MOVE_S + HOLD_S + (HOVER_M + PRESS_M) / float(speed_m_s) + AFTER_S
-        cfg = StackConfig(mode=mode, duration_s=duration_s, **task_stack_settings("pick", compliance=compliance))
+        settings = task_stack_settings("pick", compliance=compliance)
+        if not landing_speed:
+            settings["landing_speed_m_s"] = None
+        cfg = StackConfig(mode=mode, duration_s=duration_s, **settings)
         log = run_episode(world, source, HybridController(cfg), seed=seed)
         forces = world.forces_n
     finally:

@@ -11,12 +11,12 @@ from controllers.robot_model import PandaModel
 from mmact_ctrl.config import StackConfig
 from mmact_ctrl.control.capture_gate import HYSTERESIS_M, RISE_M_S, CaptureGate
 from mmact_ctrl.control.closing_gate import HOLD_S, ClosingGate
-from mmact_ctrl.control.descent import BRAKE_M_S2, DescentGovernor
+from mmact_ctrl.control.descent import BRAKE_M_S2, TCP_LEAD_S, TRACK_TAU_S, DescentGovernor
 from mmact_ctrl.control.force_guard import GUARD_FRACTION, YIELD_M_S_PER_N, ContactForceGuard
 from mmact_ctrl.controller import HybridController
 from mmact_ctrl.metrics import episode_metrics
 from scenarios.world.tasks.pick import (CAPTURE_CLEAR_M, CAPTURE_TOL_M, CLOSE_BELOW_M, CUBE_HALF_M, DESCENT_BAND_M,
-                                        PickTask)
+                                        EMPTY_GRIP_BELOW_M, LANDING_SPEED_M_S, PickTask)
 from scenarios.world.tasks.registry import task_stack_settings
 from pick_episode import run_pick_episode
 
@@ -56,6 +56,29 @@ def test_the_governor_leaves_a_rising_or_slow_reference_alone():
     assert gov(up, vel, acc)[0] is up  # going up: the same arrays
     slow = np.array([0.5, 0.0, 0.056 - 0.01 * DT])  # 0.01 m/s down in the band: under its speed
     assert gov(slow, vel, acc)[0] is slow and gov.governed_ticks == 0
+
+
+def test_the_governor_keeps_the_reference_within_its_lead_of_the_tcp_and_judges_the_tcps_speed_ahead():
+    """A reference that has run far below the TCP (a chunk that starts at the grasp height) pulls the TCP down at the
+    tracking's gain times the gap, whatever the reference's own descent: it is held at most ``TCP_LEAD_S`` of the
+    speed allowed at the TCP's height below the TCP, coming down no faster than that speed, judged where the TCP will
+    be ``TRACK_TAU_S`` later."""
+    low, high, floor = 0.05, 0.06, 0.025
+    gov = DescentGovernor((low, high), 0.12, floor, DT)
+    tcp_z = 0.15
+    s_tcp = gov.allowed_speed_m_s(tcp_z)
+    pos, vel, acc = gov(np.array([0.5, 0.0, 0.04]), np.array([0.0, 0.0, -2.0]), np.array([0.0, 0.0, -5.0]), tcp_z)
+    assert pos[2] == pytest.approx(tcp_z - s_tcp * TCP_LEAD_S) and vel[2] == pytest.approx(-s_tcp) and acc[2] == 0.0
+    assert gov.tcp_governed_ticks == 1
+    # a TCP coming down fast is judged where it will be: a slower speed is allowed than at its height
+    gov.reset()
+    _, vel, _ = gov(np.array([0.5, 0.0, 0.07]), np.array([0.0, 0.0, -1.0]), np.zeros(3), 0.07, -0.4)
+    assert vel[2] == pytest.approx(-gov.allowed_speed_m_s(0.07 - 0.4 * TRACK_TAU_S))
+    assert -vel[2] < gov.allowed_speed_m_s(0.07)
+    # a reference above the TCP's lead, no faster than allowed there, passes unchanged (the same arrays)
+    gov.reset()
+    p, v, a = np.array([0.5, 0.0, 0.149]), np.array([0.0, 0.0, -0.2]), np.zeros(3)
+    assert gov(p, v, a, tcp_z, 0.0)[0] is p and gov.tcp_governed_ticks == 0
 
 
 def test_the_closing_gate_holds_the_fingers_open_until_the_hand_is_down_and_the_hand_down_while_they_close():
@@ -185,13 +208,24 @@ def test_the_pick_task_asks_for_its_guards_and_reach_for_none():
         StackConfig(capture_tol_m=-0.01)
     with pytest.raises(ValueError, match="capture_clear_m"):
         StackConfig(capture_clear_m=float("nan"))
+    assert s["landing_speed_m_s"] == PickTask.landing_speed_m_s == LANDING_SPEED_M_S
+    assert s["empty_grip_below_m"] == PickTask.empty_grip_below_m == EMPTY_GRIP_BELOW_M < 2 * CUBE_HALF_M
+    assert not {"landing_speed_m_s", "empty_grip_below_m"} & set(task_stack_settings("insert"))
+    with pytest.raises(ValueError, match="landing_speed_m_s"):
+        StackConfig(landing_speed_m_s=0.0)
+    with pytest.raises(ValueError, match="empty_grip_below_m"):
+        StackConfig(empty_grip_below_m=-0.01)
 
 
-def test_only_a_mode_that_reads_the_object_slows_in_the_band_and_every_mode_has_the_floor_and_the_gate():
+def test_the_band_is_a_guarded_move_where_the_hand_reads_the_object_and_a_landing_speed_where_it_does_not():
     settings = task_stack_settings("pick")
     hybrid = HybridController(StackConfig(mode="hybrid", **settings))
     blind = HybridController(StackConfig(mode="open_loop", **settings))
-    assert hybrid.descent.low_m == DESCENT_BAND_M[0] and blind.descent.low_m == np.inf
+    assert hybrid.descent.low_m == blind.descent.low_m == DESCENT_BAND_M[0]
+    assert hybrid.descent.speed_m_s == StackConfig().descent_speed_m_s < blind.descent.speed_m_s == LANDING_SPEED_M_S
+    no_landing = HybridController(StackConfig(mode="open_loop", **{**settings, "landing_speed_m_s": None}))
+    assert no_landing.descent.low_m == np.inf  # the floor's braking curve only
+    assert blind.empty_grip.below_m == EMPTY_GRIP_BELOW_M and hybrid.empty_grip is None  # hybrid: the empty-hand gate
     assert hybrid.capture.safe_z_m == DESCENT_BAND_M[1] and blind.capture is None  # the gate reads the object
     assert hybrid.closing_gate.close_below_m == blind.closing_gate.close_below_m == CLOSE_BELOW_M
     reach = HybridController(StackConfig(mode="hybrid"))
@@ -230,3 +264,14 @@ def test_a_finger_no_longer_strikes_the_cube_beside_it(target, speed, seed, dura
     m = episode_metrics(log)
     assert ctl.capture.raised_ticks > 0  # the gate acted
     assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m
+
+
+def test_a_blind_hand_is_not_pulled_down_by_a_reference_far_below_it():
+    """Pick at 0.4 m/s, open loop, tuning seed 6001: a new chunk put the reference 10 cm below the TCP, at the grasp
+    height; the tracking pulled the open hand down at 0.7 m/s, 16 mm through its floor and into the belt (70 N).
+    The governor holds the reference within its lead of the TCP and judges the TCP's speed where it will be."""
+    log, ctl, _ = run_pick_episode("linear", "0.4", 6001, "5.5", mode="open_loop")
+    m = episode_metrics(log)
+    assert ctl.descent.tcp_governed_ticks > 0
+    assert m["contact_force_violations"] == 0 and m["limit_violations"] == 0, m
+    assert log.ee_pos_m[:, 2].min() > PickTask.tcp_floor_m - 0.005

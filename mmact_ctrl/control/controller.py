@@ -32,6 +32,7 @@ from mmact_ctrl.control.capture_gate import CaptureGate
 from mmact_ctrl.control.closing_gate import ClosingGate
 from mmact_ctrl.control.compliance_gate import ComplianceGate
 from mmact_ctrl.control.descent import DescentGovernor
+from mmact_ctrl.control.empty_grip import EmptyGripGate
 from mmact_ctrl.control.empty_hand import EmptyHandGate
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
@@ -97,15 +98,17 @@ class HybridController:
         self.floor = FloorClamp(config.tcp_floor_m)
         self.reflex = GraspReflex(config.grasp_reflex)
         self.closing_gate = ClosingGate(config.close_below_m, config.dt_s)
-        self.descent = (None if config.descent_band_m is None else  # the band only where the hand follows the object
-                        DescentGovernor(config.descent_band_m if layers.reads_target else None, config.descent_speed_m_s,
-                                        config.tcp_floor_m, config.dt_s))
+        self.descent = None if config.descent_band_m is None else self._descent_governor(config, layers.reads_target)
         self.capture = (CaptureGate(config.capture_tol_m, config.capture_clear_m, config.descent_band_m[1], config.dt_s)
                         if config.capture_tol_m is not None and config.descent_band_m is not None
                         and layers.reads_target else None)  # the hand over the object's top until it is between
         self.empty_hand = (EmptyHandGate(config.empty_hand_after_s, config.descent_band_m[1], config.dt_s)
                            if config.empty_hand_after_s is not None and config.descent_band_m is not None
                            and config.close_below_m is not None and layers.reads_target else None)
+        self.empty_grip = (EmptyGripGate(config.empty_grip_below_m, config.descent_band_m[1], config.dt_s)
+                           if config.empty_grip_below_m is not None and config.descent_band_m is not None
+                           and config.close_below_m is not None and not layers.reads_target else None)
+        self._gripper_meas_m: float | None = None  # the fingers' measured opening (sense_wrench), m
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -114,6 +117,18 @@ class HybridController:
         self._gripper_m = GRIPPER_OPEN_M
         self.executor.bind(ExecutorView(self))
         self._warm_up_qp()
+
+    @staticmethod
+    def _descent_governor(config: StackConfig, reads_target: bool) -> DescentGovernor:
+        """The guarded descent: the band at the guarded move's speed where the hand follows the object, at the
+        landing speed where it cannot (``StackConfig.landing_speed_m_s``; None: the floor's braking curve only)."""
+        if reads_target:
+            band, speed = config.descent_band_m, config.descent_speed_m_s
+        elif config.landing_speed_m_s is not None:
+            band, speed = config.descent_band_m, config.landing_speed_m_s
+        else:
+            band, speed = None, config.descent_speed_m_s
+        return DescentGovernor(band, speed, config.tcp_floor_m, config.dt_s)
 
     def _plan_tracker(self) -> PlanTracker:
         # the MPC object never discards a slow solve itself: lateness is the worker's to judge (in real time, a plan
@@ -230,6 +245,9 @@ class HybridController:
             self.capture.reset()
         if self.empty_hand is not None:
             self.empty_hand.reset()
+        if self.empty_grip is not None:
+            self.empty_grip.reset()
+        self._gripper_meas_m = None
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -349,22 +367,27 @@ class HybridController:
             pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, obj)
         if self.empty_hand is not None:  # a closing that found nothing: up before sideways
             pos, vel, acc = self.empty_hand(pos, vel, acc, terms.pos_m, obj, self.closing_gate.closing_ticks)
+        if self.empty_grip is not None:  # blind: fingers that closed on nothing lift the hand at once
+            pos, vel, acc = self.empty_grip(pos, vel, acc, float(terms.pos_m[2]), self._gripper_meas_m,
+                                            self.closing_gate.closing_ticks)
         if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
             pos = self.force_guard.apply(pos)
             if self.descent is not None:  # a guarded move also stops going on into the contact
                 vel, acc = self.force_guard.halt(vel, acc)
         if self.descent is not None:  # a guarded move past the objects' top, the floor as a braking curve
-            pos, vel, acc = self.descent(pos, vel, acc)
+            pos, vel, acc = self.descent(pos, vel, acc, float(terms.pos_m[2]), float(terms.vel[2]))
         tau = self.qp.solve(terms, q_rad, dq_rad_s,
                             TaskReference(pos, vel, acc, s.rot, s.ang_vel_rad_s, s.ang_acc_rad_s2, q_post))
         self._gripper_m = gripper_m
         return TickOutput(tau_nm=tau, gripper_m=gripper_m, ref_pos_m=s.pos_m, ee_pos_m=terms.pos_m,
                           ddq_cmd_rad_s2=self.qp.last_ddq, tcp_vel_m_s=terms.vel[:3])
 
-    def sense_wrench(self, wrench: np.ndarray) -> None:
+    def sense_wrench(self, wrench: np.ndarray, gripper_m: float | None = None) -> None:
         """The robot's measured external wrench at the TCP this tick (``RobotState.wrench_ext``; the runner calls it
-        only where the world measures one: in reach nothing of this runs). Contact (the force over
-        ``CONTACT_LATCH_N``) latches the chunk's correction; the guard sees the force."""
+        only where the world measures one: in reach nothing of this runs), and the fingers' measured opening
+        ``gripper_m`` (m; None: not given). Contact (the force over ``CONTACT_LATCH_N``) latches the chunk's
+        correction; the guard sees the force; the empty-grip gate the opening."""
+        self._gripper_meas_m = gripper_m
         force = np.asarray(wrench, dtype=float)[:3]
         self._force_n = float(np.linalg.norm(force))
         self.chunk.touching = self._force_n > CONTACT_LATCH_N

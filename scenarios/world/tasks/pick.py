@@ -48,6 +48,12 @@ CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045
 #: its width by 0.25 s (``mmact_ctrl.control.empty_hand``). Measured on the tuning seeds (6000-6049, hybrid): at the
 #: closing's first tick it took the grasps that start with the cube 2-3 cm off (linear 0.2 m/s: 45 -> 17 picks)
 EMPTY_HAND_AFTER_S = 0.25
+#: the speed at which a mode that does not read the cube passes the band, m/s: an open hand landing on a cube at the
+#: TCP's 0.155 m/s peaked at 23 N stiff and 28 N with ``--compliance``, at 0.18 m/s at 28 and 34 N
+#: (``docs/contact/landing_floor.txt``); 0.12 m/s keeps a margin for the tracking's lag
+LANDING_SPEED_M_S = 0.12
+#: the fingers closed on a 4.5 cm cube stop at its width; closer than this they hold nothing, m
+EMPTY_GRIP_BELOW_M = 0.03
 #: the distractor starts this far from the instructed cube, m
 DISTRACTOR_GAP_M = (0.12, 0.2)
 INSTRUCTION_TEMPLATES: tuple[str, ...] = (
@@ -78,6 +84,10 @@ class PickWorld(ContactWorld):
         self._cube_v = [int(m.jnt_dofadr[m.body_jntadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)]])
                         for b in CUBE_BODIES[: scene.n_objects]]
         self._belt = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, BELT_GEOM)
+        #: body id -> cube index, and a scratch state for checking where a jump would put a cube
+        self._cube_of_body = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b): i
+                              for i, b in enumerate(CUBE_BODIES[: scene.n_objects])}
+        self._scratch = mujoco.MjData(m)
         self._motion = None
         self._gripper_cmd_m = GRIPPER_MAX_M
         self._jumps: list[tuple[float, np.ndarray]] = []
@@ -149,12 +159,55 @@ class PickWorld(ContactWorld):
         t = float(d.time)
         if self._jumps and t >= self._jumps[0][0]:
             _, delta = self._jumps.pop(0)
-            for adr in self._cube_q:  # the carrier jumps with what rides it, as it carries both in every other motion
-                if d.qpos[adr + 2] < CUBE_REST_Z_M + 0.005:  # on the carrier (not in the hand): it jumps with it
-                    d.qpos[adr:adr + 2] = np.clip(d.qpos[adr:adr + 2] + delta[:2], self._on_belt_low, self._on_belt_high)
+            self._jump_cubes(delta)
         self._set_belt(t)
         self.progress.update(t, self._cube_z(), gripper_m, float(np.linalg.norm(self.model.geom_surfacevel[self._belt, :2])),
                              float(np.linalg.norm(self.measured_wrench()[:3])))
+
+    def _jump_cubes(self, delta_m: np.ndarray) -> None:
+        """The carrier's teleport by ``delta_m``: each cube on it (not lifted in the hand) jumps with it, kept on the
+        belt, unless its new place is taken by the robot or by a cube that stays (it stays where it is). A teleport
+        into the fingers is no motion a carrier makes: it put a cube inside a closed hand at once (tuning seed 6007,
+        jump 0.2 m/s: 30.7 N on the robot from an overlap that no controller could have avoided). The places are
+        checked on a scratch copy of the state: the simulation's own contacts and forces stay those of its step."""
+        d, scratch = self.data, self._scratch
+        scratch.qpos[:] = d.qpos
+        moving = set()
+        for i, adr in enumerate(self._cube_q):
+            if d.qpos[adr + 2] < CUBE_REST_Z_M + 0.005:  # on the carrier
+                scratch.qpos[adr:adr + 2] = np.clip(d.qpos[adr:adr + 2] + delta_m[:2], self._on_belt_low,
+                                                    self._on_belt_high)
+                moving.add(i)
+        while moving:  # a cube that stays may take the place of one that would land on it: check again
+            blocked = self._overlapping_cubes(scratch) & moving
+            if not blocked:
+                break
+            for i in blocked:
+                adr = self._cube_q[i]
+                scratch.qpos[adr:adr + 2] = d.qpos[adr:adr + 2]
+            moving -= blocked
+        for i in moving:
+            adr = self._cube_q[i]
+            d.qpos[adr:adr + 2] = scratch.qpos[adr:adr + 2]
+
+    def _overlapping_cubes(self, state: mujoco.MjData) -> set[int]:
+        """The cubes that overlap a robot geom or another cube in ``state`` (its positions; its contacts are
+        recomputed)."""
+        m = self.model
+        mujoco.mj_kinematics(m, state)
+        mujoco.mj_collision(m, state)
+        out = set()
+        for k in range(state.ncon):
+            c = state.contact[k]
+            if c.dist >= 0.0:
+                continue
+            g1, g2 = int(c.geom1), int(c.geom2)
+            c1, c2 = self._cube_of_body.get(int(m.geom_bodyid[g1])), self._cube_of_body.get(int(m.geom_bodyid[g2]))
+            if c1 is not None and (c2 is not None or self._robot_geom[g2]):
+                out.add(c1)
+            if c2 is not None and (c1 is not None or self._robot_geom[g1]):
+                out.add(c2)
+        return out
 
     def _cube_z(self) -> np.ndarray:
         return np.array([self.data.qpos[a + 2] for a in self._cube_q])
@@ -213,6 +266,12 @@ class PickTask:
     #: into the cube at the grasp height (tuning seeds 6000-6049, hybrid: episodes over 30 N, reversal 6 -> 5, jump
     #: 5 -> 2; picks unchanged on linear 0.2 and 0.4 m/s, reversal and jump)
     empty_hand_after_s = EMPTY_HAND_AFTER_S
+    #: a mode that does not read the cube passes the band no faster than a landing stays under the contact-force
+    #: limit (``StackConfig.landing_speed_m_s``)
+    landing_speed_m_s = LANDING_SPEED_M_S
+    #: fingers closed past this found nothing: a mode that does not read the cube lifts the hand at once
+    #: (``StackConfig.empty_grip_below_m``)
+    empty_grip_below_m = EMPTY_GRIP_BELOW_M
     world_class = PickWorld
 
     def add_to_scene(self, spec, config: SceneConfig) -> None:
