@@ -64,7 +64,7 @@ def test_the_governor_keeps_the_reference_within_its_lead_of_the_tcp_and_judges_
     speed allowed at the TCP's height below the TCP, coming down no faster than that speed, judged where the TCP will
     be ``TRACK_TAU_S`` later."""
     low, high, floor = 0.05, 0.06, 0.025
-    gov = DescentGovernor((low, high), 0.12, floor, DT)
+    gov = DescentGovernor((low, high), 0.12, floor, DT, follow_tcp=True)
     tcp_z = 0.15
     s_tcp = gov.allowed_speed_m_s(tcp_z)
     pos, vel, acc = gov(np.array([0.5, 0.0, 0.04]), np.array([0.0, 0.0, -2.0]), np.array([0.0, 0.0, -5.0]), tcp_z)
@@ -79,6 +79,10 @@ def test_the_governor_keeps_the_reference_within_its_lead_of_the_tcp_and_judges_
     gov.reset()
     p, v, a = np.array([0.5, 0.0, 0.149]), np.array([0.0, 0.0, -0.2]), np.zeros(3)
     assert gov(p, v, a, tcp_z, 0.0)[0] is p and gov.tcp_governed_ticks == 0
+    # a governor that does not follow the TCP (a mode that reads the object) ignores it
+    blind_to_tcp = DescentGovernor((low, high), 0.12, floor, DT)
+    p = np.array([0.5, 0.0, 0.04])
+    assert blind_to_tcp(p, np.zeros(3), np.zeros(3), tcp_z, -1.0)[0] is p and blind_to_tcp.tcp_governed_ticks == 0
 
 
 def test_the_closing_gate_holds_the_fingers_open_until_the_hand_is_down_and_the_hand_down_while_they_close():
@@ -226,6 +230,7 @@ def test_the_band_is_a_guarded_move_where_the_hand_reads_the_object_and_a_landin
     no_landing = HybridController(StackConfig(mode="open_loop", **{**settings, "landing_speed_m_s": None}))
     assert no_landing.descent.low_m == np.inf  # the floor's braking curve only
     assert blind.empty_grip.below_m == EMPTY_GRIP_BELOW_M and hybrid.empty_grip is None  # hybrid: the empty-hand gate
+    assert blind.descent.follow_tcp and not hybrid.descent.follow_tcp  # hybrid's descent as it was measured
     assert hybrid.capture.safe_z_m == DESCENT_BAND_M[1] and blind.capture is None  # the gate reads the object
     assert hybrid.closing_gate.close_below_m == blind.closing_gate.close_below_m == CLOSE_BELOW_M
     reach = HybridController(StackConfig(mode="hybrid"))

@@ -120,15 +120,16 @@ class HybridController:
 
     @staticmethod
     def _descent_governor(config: StackConfig, reads_target: bool) -> DescentGovernor:
-        """The guarded descent: the band at the guarded move's speed where the hand follows the object, at the
-        landing speed where it cannot (``StackConfig.landing_speed_m_s``; None: the floor's braking curve only)."""
+        """The guarded descent: the band at the guarded move's speed where the hand follows the object; where it
+        cannot, at the landing speed (``StackConfig.landing_speed_m_s``; None: the floor's braking curve only), the
+        reference held near the measured TCP."""
         if reads_target:
             band, speed = config.descent_band_m, config.descent_speed_m_s
         elif config.landing_speed_m_s is not None:
             band, speed = config.descent_band_m, config.landing_speed_m_s
         else:
             band, speed = None, config.descent_speed_m_s
-        return DescentGovernor(band, speed, config.tcp_floor_m, config.dt_s)
+        return DescentGovernor(band, speed, config.tcp_floor_m, config.dt_s, follow_tcp=not reads_target)
 
     def _plan_tracker(self) -> PlanTracker:
         # the MPC object never discards a slow solve itself: lateness is the worker's to judge (in real time, a plan

@@ -50,8 +50,11 @@ TRACK_TAU_S = 0.025
 class DescentGovernor:
     """See the module. ``governed_ticks`` counts the ticks it slowed the reference."""
 
-    def __init__(self, band_m: tuple[float, float] | None, speed_m_s: float, floor_m: float, dt_s: float) -> None:
+    def __init__(self, band_m: tuple[float, float] | None, speed_m_s: float, floor_m: float, dt_s: float,
+                 follow_tcp: bool = False) -> None:
         self.low_m, self.high_m = (np.inf, np.inf) if band_m is None else (float(z) for z in band_m)
+        #: whether the reference is also held near the measured TCP (``__call__``'s ``tcp_z_m``)
+        self.follow_tcp = bool(follow_tcp)
         self.speed_m_s = float(speed_m_s)
         self.floor_m = float(floor_m)
         self.dt_s = float(dt_s)
@@ -72,9 +75,9 @@ class DescentGovernor:
 
     def __call__(self, pos_m: np.ndarray, vel_m_s: np.ndarray, acc_m_s2: np.ndarray,
                  tcp_z_m: float | None = None, tcp_vz_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The reference (position m, velocity m/s, acceleration m/s^2) with its descent bounded; with the TCP's
-        measured height ``tcp_z_m`` (m), also never more than ``TCP_LEAD_S`` of the speed allowed at the TCP's height
-        below the TCP."""
+        """The reference (position m, velocity m/s, acceleration m/s^2) with its descent bounded; following the TCP,
+        with its measured height ``tcp_z_m`` (m) and vertical velocity ``tcp_vz_m_s`` (m/s), also never more than
+        ``TCP_LEAD_S`` of the speed allowed at the TCP's height below it."""
         z = float(pos_m[2])
         if self.z_m is None or z >= self.z_m:
             out = pos_m, vel_m_s, acc_m_s2
@@ -88,7 +91,7 @@ class DescentGovernor:
                 z = z_min
                 self.governed_ticks += 1
                 out = self._bounded(pos_m, vel_m_s, acc_m_s2, z_min, s)
-        if tcp_z_m is not None:
+        if tcp_z_m is not None and self.follow_tcp:
             # the speed allowed where the TCP will be once the tracking has caught up (its time constant)
             s_tcp = self.allowed_speed_m_s(tcp_z_m + min(tcp_vz_m_s, 0.0) * TRACK_TAU_S)
             z_lead = tcp_z_m - s_tcp * TCP_LEAD_S
