@@ -99,8 +99,7 @@ class DescentGovernor:
             # the speed allowed where the TCP will be once the tracking has caught up (its time constant)
             s_tcp = self.allowed_speed_m_s(tcp_z_m + min(tcp_vz_m_s, 0.0) * TRACK_TAU_S)
             z_lead = tcp_z_m - s_tcp * TCP_LEAD_S
-            pos, vel = out[0], out[1]
-            if (z < z_lead and z_lead > self.floor_m) or vel[2] < -s_tcp:
+            if (z < z_lead and z_lead > self.floor_m) or out[1][2] < -s_tcp:
                 z = max(z, z_lead) if z_lead > self.floor_m else z
                 self.tcp_governed_ticks += 1
                 out = self._bounded(*out, z, s_tcp)
