@@ -255,11 +255,13 @@ def assemble_qp(M, h, J, dJv, pos, rot, vel, ref_pos, ref_vel, ref_acc, ref_rot,
 
 
 @njit(cache=True, nogil=True)
-def impedance_acc(M, J, pos, rot, vel, ref_pos, ref_vel, ref_acc, k3, d3, force_max, out):
+def impedance_acc(M, J, pos, rot, vel, ref_pos, ref_vel, ref_acc, k3, d3, force_max, normal, out):
     """The impedance task's desired TCP acceleration (``ImpedanceTask.desired_acc``) into ``out`` (3,), m/s^2:
     ``Lambda^-1 sat(Lambda a_ref + R (K R'e + D R'e_dot))`` with ``Lambda^-1 = Jp M^-1 Jp'`` (``Jp`` the
     Jacobian's linear rows; ``M^-1 Jp'`` by Cholesky), ``K``, ``D`` (3,) per tool axis, ``sat`` scaling the force's
-    magnitude down to ``force_max`` (N)."""
+    magnitude down to ``force_max`` (N). With a measured contact ``normal`` (3,), unit, world frame (the direction the
+    world pushes the TCP; zeros: none, or the magnitude is capped), ``sat`` caps only the force's component into the
+    contact (``-f . normal``) at ``force_max`` (``ImpedanceTask.pressing_only``)."""
     n = M.shape[0]
     L = np.zeros((n, n))  # M = L L'
     for j in range(n):
@@ -317,8 +319,15 @@ def impedance_acc(M, J, pos, rot, vel, ref_pos, ref_vel, ref_acc, k3, d3, force_
         sd[a] = k3[a] * e + d3[a] * ev
     for a in range(3):
         f[a] += rot[a, 0] * sd[0] + rot[a, 1] * sd[1] + rot[a, 2] * sd[2]
-    norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-    scale = force_max / norm if norm > force_max else 1.0
+    if normal[0] != 0.0 or normal[1] != 0.0 or normal[2] != 0.0:  # only the push into the contact is capped
+        press = -(f[0] * normal[0] + f[1] * normal[1] + f[2] * normal[2])
+        if press > force_max:
+            for a in range(3):
+                f[a] += (press - force_max) * normal[a]
+        scale = 1.0
+    else:
+        norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        scale = force_max / norm if norm > force_max else 1.0
     for a in range(3):
         out[a] = (li[a, 0] * f[0] + li[a, 1] * f[1] + li[a, 2] * f[2]) * scale
 

@@ -89,6 +89,9 @@ class StackConfig:
             it open until then, whatever the chunk's clock says (``mmact_ctrl.control.grasp_reflex``).
         compliance: the TCP tracks its reference as a spring-damper, stiff or soft per tool axis, whose force is
             capped below ``contact_force_limit_n`` (``controllers.qp.impedance``), in place of stiff tracking.
+        compliance_caps_pressing: with ``compliance``, the cap acts only on the force's push into the measured
+            contact (``ImpedanceTask.pressing_only``): the force that lifts the hand off the contact, or moves it
+            along it, is not capped. False (insert): the force's magnitude is capped, as published.
         close_below_m: the gripper starts closing only with the TCP below this height, m, in every mode
             (``mmact_ctrl.control.closing_gate``); None (reach, insert): the chunk's clock decides.
         descent_band_m: (low, high) TCP heights, m, that the reference passes going down at most at
@@ -135,6 +138,7 @@ class StackConfig:
     empty_grip_below_m: float | None = None
     grasp_reflex: bool = False
     compliance: bool = False
+    compliance_caps_pressing: bool = False
     close_below_m: float | None = None
     descent_band_m: tuple[float, float] | None = None
     descent_speed_m_s: float = 0.05

@@ -109,3 +109,46 @@ def test_a_compliant_insert_hands_the_push_to_the_impedance_and_seats_within_the
     m = episode_metrics(log)
     assert m["success"] and m["limit_violations"] == 0 and m["peak_contact_force_n"] < 30.0, m
     assert controller.compliance.switches >= 1  # the chamfer's contact put the impedance in the position task's place
+
+
+def test_a_pressing_only_impedance_takes_the_measured_normal_and_without_one_is_the_magnitude_capped_qp():
+    model = PandaModel()
+    cfg = QPConfig(dt_s=DT_S)
+    plain = TaskSpaceQP(cfg, contact_task=ImpedanceTask(force_max_n=20.0))
+    pressing = TaskSpaceQP(cfg, contact_task=ImpedanceTask(force_max_n=20.0, pressing_only=True))
+    # no normal measured: the same QP as the magnitude-capped one, bit for bit
+    assert np.array_equal(_torques(pressing, model, 5, contact=True), _torques(plain, model, 5, contact=True))
+    n = np.array([0.0, 0.6, 0.8])
+    pressing.set_contact(True, n)
+    q, dq, terms, ref = next(_states(model, 1, 9))
+    assert np.array_equal(pressing.state(terms, q, dq, ref).contact_normal, n)
+    plain.set_contact(True, n)  # a magnitude-capped impedance ignores the normal
+    assert plain.state(terms, q, dq, ref).contact_normal is None
+    pressing.set_contact(True, None)  # the force fell to zero: no normal
+    assert pressing.state(terms, q, dq, ref).contact_normal is None
+    pressing.set_contact(True, n)
+    pressing.reset(terms.h)  # a new episode forgets it
+    assert pressing.state(terms, q, dq, ref).contact_normal is None and not pressing.in_contact
+
+
+def test_pick_caps_only_the_push_into_the_contact_and_insert_the_magnitude():
+    assert task_stack_settings("pick", compliance=True)["compliance_caps_pressing"]
+    assert "compliance_caps_pressing" not in task_stack_settings("insert", compliance=True)
+    assert not StackConfig().compliance_caps_pressing
+
+
+def test_a_compliant_hand_that_hit_the_belt_lifts_itself_out():
+    """Pick at 0.4 m/s, hybrid, ``--compliance``, seed 1041 (a published seed, read after its run found the fault):
+    the open hand, sweeping sideways at 0.6 m/s near the robot's base, went under its reference into the belt
+    (250 N). With the impedance's force capped in magnitude it could not lift itself out against the belt dragging
+    its fingers (20 N up): 620 ticks over 30 N and 199 past the joint position limits. Capped only on the push into
+    the contact, the hand lifts off."""
+    from pick_episode import run_pick_episode
+
+    log, ctl, cfg = run_pick_episode("linear", "0.4", 1041, "6", compliance=True)
+    assert cfg.compliance_caps_pressing and ctl.compliance.switches >= 1
+    m = episode_metrics(log)
+    assert m["limit_violations"] == 0, m
+    log, _, _ = run_pick_episode("linear", "0.4", 1041, "6", compliance=True, compliance_caps_pressing=False)
+    m = episode_metrics(log)
+    assert m["position_violations"] > 0 and m["contact_force_violations"] > 100, m

@@ -120,7 +120,7 @@ def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
         state = QPState(terms, q, dq, ref, qp.tau_last, qp.last_ddq)
         acc = np.empty(3)
         impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2, k, d,
-                      task.force_max_n, acc)
+                      task.force_max_n, np.zeros(3), acc)
         np.testing.assert_allclose(acc, task.desired_acc(state), rtol=1e-9, atol=1e-9)
         capped += int(np.linalg.norm(task.force_n(state)) >= task.force_max_n - 1e-9)
         _assert_kernel_equals_problem(qp, terms, q, dq, ref, acc)
@@ -128,6 +128,46 @@ def test_compliance_qp_runs_the_fast_path_and_equals_the_dense_problem(model):
         tau = qp.solve(terms, q, dq, ref)  # the fast path solves it within the torque rows (the robot's condition)
         assert np.all(np.isfinite(tau)) and np.all(np.abs(tau - tau_was) <= qp.dtau_hard_nm + 1e-12)
     assert 0 < capped < 60  # the cap bound in some states and not in others
+
+
+def test_the_pressing_only_impedance_kernel_equals_the_task_and_caps_only_the_push_into_the_contact(model):
+    """``ImpedanceTask(pressing_only=True)`` (pick's ``--compliance``): with a measured contact normal the kernel's
+    desired acceleration equals the task object's; the force's push into the contact (``-f . n``) is never over the
+    cap, the rest of it (along the contact, away from it) is the uncapped force's; without a normal the kernel caps
+    the magnitude, as the plain task does."""
+    from controllers.qp.impedance import ImpedanceTask
+    from controllers.qp.state import QPState
+    from controllers.tick_kernels import impedance_acc
+
+    task, plain = ImpedanceTask(force_max_n=20.0, pressing_only=True), ImpedanceTask(force_max_n=20.0)
+    rng = np.random.default_rng(11)
+    k, d = task.gains()
+    pressed = free = 0
+    for _ in range(80):
+        q = model.home_q_rad + rng.normal(0, 0.3, 7)
+        dq = rng.normal(0, 0.5, 7)
+        terms = model.terms(q, dq)
+        ref = TaskReference(terms.pos_m + rng.normal(0, 0.05, 3), rng.normal(0, 0.2, 3), rng.normal(0, 2, 3),
+                            terms.rot, np.zeros(3), np.zeros(3), model.home_q_rad)
+        n = rng.normal(0, 1, 3)
+        n /= np.linalg.norm(n)
+        state = QPState(terms, q, dq, ref, terms.h, np.zeros(7), n)
+        acc = np.empty(3)
+        impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2, k, d,
+                      task.force_max_n, n, acc)
+        np.testing.assert_allclose(acc, task.desired_acc(state), rtol=1e-9, atol=1e-9)
+        f = task.force_n(state)
+        lam_inv = terms.J[:3] @ np.linalg.solve(terms.M, terms.J[:3].T)
+        raw = np.linalg.solve(lam_inv, ref.acc_m_s2) + task.spring_damper_n(state)
+        assert -f @ n <= task.force_max_n + 1e-9
+        np.testing.assert_allclose(f - (f @ n) * n, raw - (raw @ n) * n, atol=1e-9)  # along the contact: as asked
+        pressed += int(-raw @ n > task.force_max_n)
+        free += int(np.linalg.norm(f) > task.force_max_n + 1.0)  # more than the magnitude cap would have allowed
+        impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2, k, d,
+                      task.force_max_n, np.zeros(3), acc)
+        np.testing.assert_allclose(acc, plain.desired_acc(state), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(acc, task.desired_acc(state._replace(contact_normal=None)), rtol=1e-9, atol=1e-9)
+    assert 0 < pressed < 80 and free > 0
 
 
 def _random_plan(rng, t0_s, n=20, dt=0.02):

@@ -85,6 +85,36 @@ def test_the_governor_keeps_the_reference_within_its_lead_of_the_tcp_and_judges_
     assert blind_to_tcp(p, np.zeros(3), np.zeros(3), tcp_z, -1.0)[0] is p and blind_to_tcp.tcp_governed_ticks == 0
 
 
+def test_a_blind_hand_resting_on_something_under_the_band_leads_by_the_bands_speed_not_the_floor_curves():
+    """Open loop, pick at 0.2 m/s, seed 1014 (published; read after its run): an open finger rested on a cube's top
+    with the TCP just under the band's lower edge, where the speed allowed at the TCP jumps from the band's to the
+    floor curve's (0.53 m/s): the reference led the TCP by 5 mm and pressed (30.8 N). While the robot touches
+    something the lead is the band's speed's."""
+    low, high, floor = 0.0535, 0.0635, 0.025
+    gov = DescentGovernor((low, high), 0.12, floor, DT, follow_tcp=True)
+    tcp_z = 0.053
+    assert gov.allowed_speed_m_s(tcp_z) > 0.5  # under the band: the floor's curve
+    ref = np.array([0.5, 0.0, 0.03]), np.array([0.0, 0.0, -0.3]), np.zeros(3)
+    free = gov(*ref, tcp_z, 0.0)[0][2]
+    gov.reset()
+    pos, vel, _ = gov(*ref, tcp_z, 0.0, True)
+    assert free == pytest.approx(tcp_z - gov.allowed_speed_m_s(tcp_z) * TCP_LEAD_S)
+    assert pos[2] == pytest.approx(tcp_z - 0.12 * TCP_LEAD_S) and vel[2] == pytest.approx(-0.12)
+    # a governor that reads the object (no TCP lead) is not changed by the touch
+    seeing = DescentGovernor((low, high), 0.12, floor, DT)
+    p = np.array([0.5, 0.0, 0.0529])
+    assert seeing(np.array([0.5, 0.0, 0.053]), np.zeros(3), np.zeros(3), tcp_z, 0.0, True)[0][2] == 0.053
+    assert seeing(p, np.zeros(3), np.zeros(3), tcp_z, 0.0, True)[0] is p
+
+
+def test_a_blind_finger_resting_on_a_cubes_top_is_not_pressed_over_the_limit():
+    """The loop of the case above (open loop, pick at 0.2 m/s, seed 1014): under the limit throughout."""
+    log, ctl, _ = run_pick_episode("linear", "0.2", 1014, "6", mode="open_loop")
+    m = episode_metrics(log)
+    assert ctl.descent.follow_tcp and ctl.descent.tcp_governed_ticks > 0
+    assert m["limit_violations"] == 0, m
+
+
 def test_the_closing_gate_holds_the_fingers_open_until_the_hand_is_down_and_the_hand_down_while_they_close():
     gate = ClosingGate(0.04, DT)
     assert gate(0.0, 0.08) == pytest.approx(0.08) and gate.held_ticks == 1  # too high: held open

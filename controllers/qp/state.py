@@ -39,6 +39,8 @@ class QPState(NamedTuple):
         ref: the task-space reference.
         tau_last_nm: the last torque the robot received (7,), N*m (the rate limit is measured against it).
         ddq_last_rad_s2: the acceleration the last command asked for (7,) (the jerk limit is measured against it).
+        contact_normal: the measured external force's direction at the TCP (3,), unit, world frame (the direction the
+            world pushes the robot), or None: no contact measured (``TaskSpaceQP.set_contact``).
     """
 
     terms: RobotTerms
@@ -47,6 +49,7 @@ class QPState(NamedTuple):
     ref: TaskReference
     tau_last_nm: np.ndarray
     ddq_last_rad_s2: np.ndarray
+    contact_normal: np.ndarray | None = None
 
 
 class Objective(NamedTuple):

@@ -157,6 +157,9 @@ class TaskSpaceQP:
         #: the impedance that replaces the position task in contact (None: no switch), and whether it does now
         self.contact_task, self.in_contact = contact_task, False
         self._tasks_free = self._tasks_contact = None  # (tasks, kernel parameters, compiled impedance) of each
+        #: the measured contact normal the impedance's cap acts along (zeros: none; only with ``pressing_only``)
+        self._normal = np.zeros(3)
+        self._pressing_only = contact_task is not None and contact_task.pressing_only
         if contact_task is None:
             return
         if type(contact_task) is not ImpedanceTask or self.impedance is not None:
@@ -169,12 +172,21 @@ class TaskSpaceQP:
         self._tasks_contact = (soft + (contact_task,), params, compiled)
         self._imp_k, self._imp_d = contact_task.gains()
 
-    def set_contact(self, in_contact: bool) -> None:
+    def set_contact(self, in_contact: bool, normal: np.ndarray | None = None) -> None:
         """Whether the robot is in contact this tick (the controller's :class:`ComplianceGate`): with a
         ``contact_task``, the impedance tracks the reference in contact and the stiff position task in free space
         (a soft spring whose force is capped cannot brake the arm's own momentum: measured, a pick's open hand fell
-        5-8 cm under its reference onto the belt). Without one, nothing changes."""
-        if self.contact_task is None or bool(in_contact) == self.in_contact:
+        5-8 cm under its reference onto the belt). Without one, nothing changes. ``normal``: the measured external
+        force's direction this tick (3,), unit, world frame, or None (none measured): what an impedance whose cap
+        acts on the push into the contact (``ImpedanceTask.pressing_only``) caps along."""
+        if self.contact_task is None:
+            return
+        if self._pressing_only:
+            if normal is None:
+                self._normal[:] = 0.0
+            else:
+                self._normal[:] = normal
+        if bool(in_contact) == self.in_contact:
             return
         self.in_contact = bool(in_contact)
         self.tasks, self._params, self.impedance = self._tasks_contact if self.in_contact else self._tasks_free
@@ -206,7 +218,8 @@ class TaskSpaceQP:
     def state(self, terms: RobotTerms, q_rad: np.ndarray, dq_rad_s: np.ndarray, ref: TaskReference) -> QPState:
         """What the tasks and limits read at this tick."""
         self._ensure_started(terms)
-        return QPState(terms, q_rad, dq_rad_s, ref, self.tau_last, self.last_ddq)
+        normal = self._normal.copy() if self._pressing_only and np.any(self._normal != 0.0) else None
+        return QPState(terms, q_rad, dq_rad_s, ref, self.tau_last, self.last_ddq, normal)
 
     # ---- the episode ----------------------------------------------------------------------------------------
     def reset(self, tau_start_nm: np.ndarray, ddq_start_rad_s2: np.ndarray | None = None) -> None:
@@ -309,7 +322,7 @@ class TaskSpaceQP:
         if self.impedance is not None:  # the position rows' desired acceleration is the impedance's
             acc = self._imp_acc
             impedance_acc(terms.M, terms.J, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2,
-                          self._imp_k, self._imp_d, self.impedance.force_max_n, acc)
+                          self._imp_k, self._imp_d, self.impedance.force_max_n, self._normal, acc)
         assemble_qp(terms.M, terms.h, terms.J, terms.dJv, terms.pos_m, terms.rot, terms.vel, ref.pos_m, ref.vel_m_s,
                     acc, ref.rot, ref.ang_vel_rad_s, ref.ang_acc_rad_s2, ref.q_post_rad, q_rad, dq_rad_s,
                     self.tau_last, self.last_ddq, self._params, self._P_x, self._g, self._A_x, self._l, self._u)

@@ -58,7 +58,8 @@ def make_qp(config: StackConfig) -> TaskSpaceQP:
     qp_config = replace(config.qp, dt_s=config.dt_s)
     if not config.compliance:
         return TaskSpaceQP(qp_config)
-    return TaskSpaceQP(qp_config, contact_task=ImpedanceTask(force_max_n=config.contact_force_limit_n * 2.0 / 3.0))
+    return TaskSpaceQP(qp_config, contact_task=ImpedanceTask(force_max_n=config.contact_force_limit_n * 2.0 / 3.0,
+                                                             pressing_only=config.compliance_caps_pressing))
 
 
 class HybridController:
@@ -376,7 +377,8 @@ class HybridController:
             if self.descent is not None:  # a guarded move also stops going on into the contact
                 vel, acc = self.force_guard.halt(vel, acc)
         if self.descent is not None:  # a guarded move past the objects' top, the floor as a braking curve
-            pos, vel, acc = self.descent(pos, vel, acc, float(terms.pos_m[2]), float(terms.vel[2]))
+            pos, vel, acc = self.descent(pos, vel, acc, float(terms.pos_m[2]), float(terms.vel[2]),
+                                         self.chunk.touching)
         tau = self.qp.solve(terms, q_rad, dq_rad_s,
                             TaskReference(pos, vel, acc, s.rot, s.ang_vel_rad_s, s.ang_acc_rad_s2, q_post))
         self._gripper_m = gripper_m
@@ -394,7 +396,8 @@ class HybridController:
         self.chunk.touching = self._force_n > CONTACT_LATCH_N
         self.force_guard.update(force)
         if self.compliance is not None:  # the impedance's turn in the QP, or the stiff position task's
-            self.qp.set_contact(self.compliance.update(self._force_n))
+            normal = force / self._force_n if self._force_n > 0.0 else None  # the cap's direction (pressing_only)
+            self.qp.set_contact(self.compliance.update(self._force_n), normal)
 
     def _estimate_view(self):
         """What the executors read of the target estimate: the estimator, or its predictions reflected at the walls of

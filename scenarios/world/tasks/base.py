@@ -38,6 +38,8 @@ class Task(Protocol):
             band (``StackConfig.landing_speed_m_s``), m/s; None: no band in those modes.
         empty_grip_below_m: fingers closed closer than this found nothing: the hand rises at once, in a mode that
             does not read the object (``StackConfig.empty_grip_below_m``), m; None: no such gate.
+        compliance_caps_pressing: with ``--compliance``, the impedance's force cap acts only on the push into the
+            measured contact (``StackConfig.compliance_caps_pressing``); False: on the force's magnitude.
     """
 
     name: str
@@ -54,6 +56,7 @@ class Task(Protocol):
     empty_hand_after_s: float | None
     landing_speed_m_s: float | None
     empty_grip_below_m: float | None
+    compliance_caps_pressing: bool
 
     def add_to_scene(self, spec, config) -> None:
         """Add the task's bodies, pads and contact settings to the MjSpec of the Panda scene."""

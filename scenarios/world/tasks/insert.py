@@ -148,6 +148,7 @@ class InsertTask:
     empty_hand_after_s = None
     landing_speed_m_s = None
     empty_grip_below_m = None
+    compliance_caps_pressing = False
     #: the gripper squeezes the peg with about 40 N a finger (the Franka Hand: 70 N continuous); at 20 N the peg slid
     #: and turned in the fingers under the push (hybrid 40 of 50 seated, 11 of its 12 failures with 11-23 mm of slip)
     scene_overrides = {"gripper_kp": 2000.0, "n_objects": 1}

@@ -272,6 +272,11 @@ class PickTask:
     #: fingers closed past this found nothing: a mode that does not read the cube lifts the hand at once
     #: (``StackConfig.empty_grip_below_m``)
     empty_grip_below_m = EMPTY_GRIP_BELOW_M
+    #: ``--compliance`` caps only the push into the measured contact (``StackConfig.compliance_caps_pressing``): with
+    #: the magnitude capped, an open hand that hit the belt at 0.6 m/s could not lift itself out (20 N up against the
+    #: belt dragging its fingers): 620 ticks over 30 N and 199 past the joint position limits (hybrid, 0.4 m/s, seed
+    #: 1041); the tuning seeds' figures are in the README (Contact)
+    compliance_caps_pressing = True
     world_class = PickWorld
 
     def add_to_scene(self, spec, config: SceneConfig) -> None:

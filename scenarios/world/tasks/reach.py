@@ -29,6 +29,7 @@ class ReachTask:
     empty_hand_after_s = None
     landing_speed_m_s = None
     empty_grip_below_m = None
+    compliance_caps_pressing = False
     #: SceneConfig fields the task sets (none: reach's scene is the base scene)
     scene_overrides: dict = {}
 

@@ -40,8 +40,8 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
 def task_guard_settings(task) -> dict:
     """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``,
     ``Task.guard_yield_m_s_per_n`` where it is not the default, ``Task.empty_hand_after_s``,
-    ``Task.landing_speed_m_s``, ``Task.empty_grip_below_m``) as ``StackConfig`` settings; none for a task without
-    them (reach, insert: their stacks as published)."""
+    ``Task.landing_speed_m_s``, ``Task.empty_grip_below_m``, ``Task.compliance_caps_pressing``) as ``StackConfig``
+    settings; none for a task without them (reach, insert: their stacks as published)."""
     out = {}
     if task.mpc_z_weight != 1.0:
         from controllers.mpc import MPCConfig
@@ -59,6 +59,8 @@ def task_guard_settings(task) -> dict:
         out["landing_speed_m_s"] = float(task.landing_speed_m_s)
     if task.empty_grip_below_m is not None:
         out["empty_grip_below_m"] = float(task.empty_grip_below_m)
+    if task.compliance_caps_pressing:
+        out["compliance_caps_pressing"] = True
     if getattr(task, "capture_tol_m", None) is not None:
         out["capture_tol_m"] = float(task.capture_tol_m)
         out["capture_clear_m"] = float(task.capture_clear_m)
