@@ -49,7 +49,7 @@ CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045
 #: closing's first tick it took the grasps that start with the cube 2-3 cm off (linear 0.2 m/s: 45 -> 17 picks)
 EMPTY_HAND_AFTER_S = 0.25
 #: the speed at which a mode that does not read the cube passes the band, m/s: an open hand landing on a cube at the
-#: TCP's 0.155 m/s peaked at 23 N stiff and 28 N with ``--compliance``, at 0.18 m/s at 28 and 34 N
+#: TCP's 0.155 m/s peaked at 20 N stiff and 27 N with ``--compliance``, at 0.18 m/s at 27 and 34 N
 #: (``docs/contact/landing_floor.txt``); 0.12 m/s keeps a margin for the tracking's lag
 LANDING_SPEED_M_S = 0.12
 #: the fingers closed on a 4.5 cm cube stop at its width; closer than this they hold nothing, m
