@@ -92,6 +92,7 @@ class HybridController:
         self.chunk = ChunkStage(self.executor, (sc.a_max_m_s2, sc.j_max_m_s3, sc.dw_max_rad_s2, sc.ddw_max_rad_s3),
                                 in_hand=self._object_in_hand)
         self._force_n = 0.0  # the measured external force at the TCP (sense_wrench), N
+        self._normal = np.zeros(3)  # its direction, unit (sense_wrench; the compliant QP's cap acts along it)
         self.force_guard = ContactForceGuard(config.contact_force_limit_n, config.dt_s, config.tcp_floor_m,
                                              config.guard_yield_m_s_per_n)
         #: ``--compliance``: the impedance in contact, stiff tracking in free space (None: stiff throughout)
@@ -396,7 +397,7 @@ class HybridController:
         self.chunk.touching = self._force_n > CONTACT_LATCH_N
         self.force_guard.update(force)
         if self.compliance is not None:  # the impedance's turn in the QP, or the stiff position task's
-            normal = force / self._force_n if self._force_n > 0.0 else None  # the cap's direction (pressing_only)
+            normal = np.divide(force, self._force_n, out=self._normal) if self._force_n > 0.0 else None  # no allocation
             self.qp.set_contact(self.compliance.update(self._force_n), normal)
 
     def _estimate_view(self):
