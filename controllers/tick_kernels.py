@@ -396,15 +396,16 @@ def sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out
 
 @njit(cache=True, nogil=True)
 def sample_plan_blend(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, old_t0_s, old_dt_s, old_q_knots,
-                      old_dq_knots, old_ddq, old_ee_pos0, old_jl, blend_s, q_out, task_out):
+                      old_dq_knots, old_ddq, old_ee_pos0, old_jl, blend_from_s, blend_s, q_out, task_out):
     """The hand-over of ``PlanTracker._sample`` in one call: the new plan and the old one sampled at ``t_s``
-    (:func:`sample_plan_task`), the old blended into the new with the smoothstep of ``(t_s - t0_s) / blend_s``:
+    (:func:`sample_plan_task`), the old blended into the new with the smoothstep of ``(t_s - blend_from_s) /
+    blend_s`` (``blend_from_s``: when the new plan was taken, its ``t0_s`` when solved inline):
     ``out = old + w (new - old)``, into ``q_out`` (7,) and ``task_out`` (3, 3)."""
     sample_plan_task(t_s, t0_s, dt_s, q_knots, dq_knots, ddq, ee_pos0, jl, q_out, task_out)
     q_old = np.empty(q_out.shape[0])
     task_old = np.empty((3, 3))
     sample_plan_task(t_s, old_t0_s, old_dt_s, old_q_knots, old_dq_knots, old_ddq, old_ee_pos0, old_jl, q_old, task_old)
-    x = (t_s - t0_s) / blend_s
+    x = (t_s - blend_from_s) / blend_s
     w = x * x * (3.0 - 2.0 * x)
     for r in range(3):
         for c in range(3):

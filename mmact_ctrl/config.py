@@ -72,6 +72,12 @@ class StackConfig:
         mpc_phase_s: hybrid with MPC: the MPC ticks are at ``mpc_phase_s + n / mpc.rate_hz``. The real-time mode sets
             5 ms, half a 100 Hz perception period, so the MPC's 50 Hz work and the filter's 100 Hz fusion fall on
             different ticks (together they made the slowest ticks); 0 in simulated time keeps the published results.
+        mpc_delay_s: hybrid with MPC, simulated time: None (default) solves each plan inline, at the tick that asks
+            for it, and that tick tracks it (every published result). A time >= 0, at most one MPC period: the plan
+            is solved in a process of its own beside the loop and taken that much later in simulated time
+            (``mmact_ctrl.mpc_worker.DeferredMPC``: deterministic whatever the load; 0 gives the inline results
+            bit for bit), so the solve leaves the loop's thread, at the cost of a plan that starts from a state that
+            old. Call ``HybridController.close()`` when done (the process is a daemon: it ends with the program).
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
         guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
@@ -131,6 +137,7 @@ class StackConfig:
     mpc_keep_plan_s: float = 0.1
     mpc_blend_s: float = 0.02
     mpc_phase_s: float = 0.0
+    mpc_delay_s: float | None = None
     residual_checkpoint: str = ""
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N
@@ -218,6 +225,9 @@ class StackConfig:
             raise ValueError(f"mpc_blend_s must be in [0, the MPC horizon], got {self.mpc_blend_s}")
         if not 0 <= self.mpc_phase_s < 1.0 / self.mpc.rate_hz:
             raise ValueError(f"mpc_phase_s must be in [0, the MPC period {1.0 / self.mpc.rate_hz:g} s), got {self.mpc_phase_s}")
+        if self.mpc_delay_s is not None and not 0 <= self.mpc_delay_s <= 1.0 / self.mpc.rate_hz:
+            raise ValueError(f"mpc_delay_s must be None or in [0, the MPC period {1.0 / self.mpc.rate_hz:g} s], "
+                             f"got {self.mpc_delay_s}")
         if self.abort_after_missed_ticks < 1:
             raise ValueError(f"abort_after_missed_ticks must be >= 1, got {self.abort_after_missed_ticks}")
         if self.latency_ms / 1000.0 >= self.duration_s:

@@ -6,6 +6,10 @@ plan that has finished (:meth:`poll`). Two workers:
 - :class:`InlineMPC` (simulated time): the plan is solved when it is asked for and is ready at once, as if a solver
   beside the loop had answered instantly; deterministic (no wall-clock deadline). Its solve time is recorded apart
   from the control tick (``solve_us``), because on a robot it is not spent on the 1 kHz path.
+- :class:`DeferredMPC` (simulated time, ``StackConfig.mpc_delay_s``): a process of its own solves while the loop
+  goes on, and the plan asked for at ``t`` is taken at the first tick at or after ``t + delay`` in simulated time
+  (the loop waits for it there if it has not come back): deterministic, whatever the load, and the solve is off the
+  loop's thread. With a delay of 0 it gives the inline results bit for bit (the loop then waits for every plan).
 - :class:`ProcessMPC` (real time): a process of its own solves while the 1 kHz loop goes on; a plan is used from
   the tick it has come back. A problem asked for while the previous one is still being solved waits (only the
   newest is kept); a plan that took longer than ``max_solve_ms`` is late: counted and discarded, and the QP keeps the
@@ -52,8 +56,8 @@ class InlineMPC:
         self.solve_us.append((time.perf_counter() - t0) * 1e6)
         self._done = (t_s, plan)
 
-    def poll(self) -> tuple[float, MPCPlan] | None:
-        """The newest finished ``(request time, plan)`` not yet taken, or None."""
+    def poll(self, t_s: float | None = None) -> tuple[float, MPCPlan] | None:
+        """The newest finished ``(request time, plan)`` not yet taken, or None (``t_s``, the tick's time: unused)."""
         done, self._done = self._done, None
         return done
 
@@ -89,6 +93,118 @@ def _serve_mpc(conn, config, q_nominal_rad) -> None:
         conn.send((t_s, plan, (time.perf_counter() - t0) * 1e6, mpc.failures))
 
 
+def _start_process(config, q_nominal_rad):
+    """``(connection, process)`` of a fresh MPC process (:func:`_serve_mpc`), once it has built its MPC."""
+    import multiprocessing as mp
+    from dataclasses import replace
+
+    ctx = mp.get_context("spawn")  # a fresh interpreter: no copy of the parent's renderer, threads or sockets
+    conn, child = ctx.Pipe(duplex=True)
+    proc = ctx.Process(target=_serve_mpc, args=(child, replace(config, max_solve_ms=math.inf),
+                                                np.asarray(q_nominal_rad, dtype=float)),
+                       name="mpc-process", daemon=True)
+    proc.start()
+    child.close()
+    if not conn.poll(60.0) or conn.recv()[0] != "ready":
+        raise RuntimeError("the MPC process did not start")
+    return conn, proc
+
+
+def _stop_process(conn, proc) -> None:
+    try:
+        conn.send(("stop",))
+    except (BrokenPipeError, OSError):
+        pass
+    proc.join(timeout=2.0)
+    if proc.is_alive():
+        proc.kill()
+
+
+class DeferredMPC:
+    """Solve in a process of its own beside the loop, in simulated time: the plan asked for at ``t_s`` is taken at
+    the first tick at or after ``t_s + delay_s`` (:meth:`poll` with the tick's time), waiting for it there if it
+    has not come back. Every problem is solved, in order (none superseded, none late): the results depend on the
+    delay, never on the machine's load. What it buys: the solve (about a fifth of an episode's wall time on the
+    loop's thread with the MPC inline) runs on the other core while the loop goes on; what it costs: the plan starts
+    from the state ``delay_s`` old (0: the inline results bit for bit, and no speed-up: the loop waits for each).
+
+    A fault injected into the parent's MPC object (``scenarios.faults``' ``mpc_late``) does not reach the process:
+    the fault suite runs the MPC inline.
+
+    Args:
+        config: the MPC's configuration (the process builds its own, ~0.3 s, plus the imports: 1-3 s).
+        q_nominal_rad: the posture its null-space term pulls toward.
+        delay_s: how long after it was asked for a plan is taken, s (simulated time).
+    """
+
+    #: the plan tracker blends a plan in from the tick it is taken, not from the one it was asked at: every plan
+    #: here comes ``delay_s`` late, and one a whole blend (20 ms) old would otherwise step in
+    blends_from_take = True
+
+    def __init__(self, config, q_nominal_rad, delay_s: float) -> None:
+        if not (math.isfinite(delay_s) and delay_s >= 0):
+            raise ValueError(f"delay_s must be a finite time >= 0 s, got {delay_s!r}")
+        self.delay_s = float(delay_s)
+        self._conn, self._proc = _start_process(config, q_nominal_rad)
+        self._asked: list[float] = []  # the simulated times of the problems in flight, oldest first
+        self.solve_us: list[float] = []
+        self.failures = 0
+        self.errors = 0  # problems that came back without a plan, or a process that died (the QP keeps its plan)
+        self.late = 0  # never in simulated time (the loop waits): kept for the counters
+
+    def reset(self) -> None:
+        self._drain()
+        if self._proc.is_alive():
+            try:
+                self._conn.send(("reset",))
+                while self._conn.recv()[0] != "reset":
+                    pass
+            except (EOFError, OSError):
+                self.errors += 1
+        self.solve_us, self.failures, self.errors, self.late = [], 0, 0, 0
+
+    def submit(self, t_s: float, args: tuple) -> None:
+        try:
+            self._conn.send(("solve", t_s, args))
+        except (BrokenPipeError, OSError):  # the process is gone: no plan (the QP keeps the one it has)
+            self.errors += 1
+            return
+        self._asked.append(float(t_s))
+
+    def poll(self, t_s: float | None = None) -> tuple[float, MPCPlan] | None:
+        """The newest plan due at ``t_s`` (asked for at least ``delay_s`` before it), waiting for it if it has not
+        come back; None when none is due. ``t_s`` None: none is due."""
+        done = None
+        while self._asked and t_s is not None and self._asked[0] + self.delay_s <= t_s + 1e-9:
+            self._asked.pop(0)
+            got = self._receive()
+            if got is not None:
+                done = got
+        return done
+
+    def _receive(self) -> tuple[float, MPCPlan] | None:
+        try:
+            t_s, plan, solve_us, failures = self._conn.recv()
+        except (EOFError, OSError):
+            self.errors += 1
+            return None
+        self.solve_us.append(solve_us)
+        self.failures = failures
+        if plan is None:
+            self.errors += 1
+            return None
+        return t_s, plan
+
+    def _drain(self) -> None:
+        while self._asked:
+            self._asked.pop(0)
+            self._receive()
+
+    def close(self) -> None:
+        self._asked = []
+        _stop_process(self._conn, self._proc)
+
+
 class ProcessMPC:
     """Solve in a process of its own beside the loop (real time). A thread would not do: the solver holds the GIL,
     which stalled the 1 kHz thread for the whole solve (measured here: every solve blocked it 0.5 ms or more, up to
@@ -110,23 +226,12 @@ class ProcessMPC:
 
     def __init__(self, config, q_nominal_rad, max_solve_ms: float | None = None,
                  clock: Callable[[], float] = time.perf_counter) -> None:
-        import multiprocessing as mp
-        from dataclasses import replace
-
         limit = config.max_solve_ms if max_solve_ms is None else max_solve_ms
         if not limit > 0:
             raise ValueError(f"max_solve_ms must be > 0, got {limit!r}")
         self.max_solve_s = float(limit) / 1e3 if math.isfinite(limit) else math.inf
         self._clock = clock
-        ctx = mp.get_context("spawn")  # a fresh interpreter: no copy of the parent's renderer, threads or sockets
-        self._conn, child = ctx.Pipe(duplex=True)
-        self._proc = ctx.Process(target=_serve_mpc, args=(child, replace(config, max_solve_ms=math.inf),
-                                                          np.asarray(q_nominal_rad, dtype=float)),
-                                 name="mpc-process", daemon=True)
-        self._proc.start()
-        child.close()
-        if not self._conn.poll(60.0) or self._conn.recv()[0] != "ready":
-            raise RuntimeError("the MPC process did not start")
+        self._conn, self._proc = _start_process(config, q_nominal_rad)
         self._asked: float | None = None  # wall time of the problem in flight
         self._waiting: tuple[float, tuple] | None = None
         self.solve_us: list[float] = []
@@ -153,8 +258,9 @@ class ProcessMPC:
                 self.superseded += 1
             self._waiting = (t_s, args)
 
-    def poll(self, block: bool = False) -> tuple[float, MPCPlan] | None:
-        """The plan that has come back, if in time (else counted late and None); sends the waiting problem."""
+    def poll(self, block: bool = False, t_s: float | None = None) -> tuple[float, MPCPlan] | None:
+        """The plan that has come back, if in time (else counted late and None); sends the waiting problem (``t_s``,
+        the tick's simulated time: unused, the wall clock decides)."""
         if self._asked is None or not self._conn.poll(None if block else 0):
             return None
         t_s, plan, solve_us, failures = self._conn.recv()
@@ -175,10 +281,4 @@ class ProcessMPC:
         return t_s, plan
 
     def close(self) -> None:
-        try:
-            self._conn.send(("stop",))
-        except (BrokenPipeError, OSError):
-            pass
-        self._proc.join(timeout=2.0)
-        if self._proc.is_alive():
-            self._proc.kill()
+        _stop_process(self._conn, self._proc)

@@ -85,6 +85,11 @@ def check_modes_of_running(args: argparse.Namespace) -> None:
         for mode in args.mode:
             if not make_executor(mode).layers.reads_target:
                 raise ValueError(reflex_refusal(mode))
+    if getattr(args, "mpc_delay_ms", None) is not None:
+        if args.realtime:
+            raise ValueError("--mpc-delay-ms is for simulated time: --realtime solves the MPC in its own process already")
+        if args.no_mpc:
+            raise ValueError("--mpc-delay-ms delays the MPC's plans: not with --no-mpc")
     if args.realtime:
         if args.video:
             raise ValueError("--video renders in the 1 kHz loop: not with --realtime (use --rerun PATH.rrd)")
@@ -178,6 +183,7 @@ def _run_mode(args: argparse.Namespace, mode: str, cfg, world, source, sensor, b
     controller = HybridController(cfg)
     episodes, ticks, afters, first = [], [], [], None
     with contextlib.ExitStack() as mode_stack:
+        mode_stack.callback(controller.close)  # the MPC's process, if --mpc-delay-ms
         episode = _episode_runner(args, world, source, controller, sensor, mode_stack)
         for i in range(args.episodes):
             log = episode(args.seed + i, bool(args.rerun) and i == 0, 30.0 if (args.video and i == 0) else 0.0)

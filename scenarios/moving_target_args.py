@@ -303,6 +303,12 @@ def _realtime_args(p: argparse.ArgumentParser) -> None:
     r.add_argument("--mpc-phase-ms", type=_number(float, "--mpc-phase-ms", 0, True, 19.999), default=None,
                    help="hybrid: the MPC ticks are this long after each 20 ms mark (default 5 with --realtime, so the "
                         "MPC's work and the 100 Hz fusion fall on different ticks; 0 otherwise)")
+    r.add_argument("--mpc-delay-ms", type=_number(float, "--mpc-delay-ms", 0, True, 20.0), default=None,
+                   help="simulated time, hybrid: solve the 50 Hz MPC in a process of its own beside the loop and take "
+                        "each plan this long after the tick that asked for it (0-20 ms; deterministic whatever the "
+                        "load; 0 gives the default's results bit for bit). Off by default: the plan is solved inline "
+                        "and drives the tick that asked for it, as every published figure ran. A speed option: the "
+                        "solve leaves the loop's thread; what the older plan costs is in the README (Speed)")
     r.add_argument("--qp-max-iter", type=_number(int, "--qp-max-iter", 1, True, 100000), default=None,
                    help="OSQP's iteration cap in the 1 kHz QP; a solve not converged by then goes to DAQP's exact "
                         "active-set solve (default 100 with --realtime, which bounds the command path's worst case; "
@@ -343,6 +349,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
         # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
+        mpc_delay_s=None if getattr(args, "mpc_delay_ms", None) is None else args.mpc_delay_ms / 1000.0,
         qp=QPConfig(solver=SolverSettings(max_iter=qp_max_iter(args))),
         **task_guard_settings(task),
     )

@@ -29,6 +29,9 @@ BAD = [
     (["--mode", "warp"], "--mode"),
     (["--filter", "ct-imm"], "--filter"),
     (["--mode", "residual", "--residual-checkpoint", "/nonexistent/res.pt"], "residual"),
+    (["--mpc-delay-ms", "25"], "--mpc-delay-ms"),
+    (["--mpc-delay-ms", "5", "--no-mpc"], "--mpc-delay-ms"),
+    (["--mpc-delay-ms", "5", "--realtime"], "--mpc-delay-ms"),
 ]
 
 

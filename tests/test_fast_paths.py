@@ -196,18 +196,19 @@ def test_plan_blend_kernel_equals_the_numpy_hand_over_bit_for_bit():
     """The hand-over (PlanTracker._sample) was two samples and a smoothstep in numpy; the kernel gives the same bits."""
     rng = np.random.default_rng(5)
     old, new, blend_s = _random_plan(rng, 0.98), _random_plan(rng, 1.0), 0.02
-    for t in np.concatenate([[1.0, 1.005, 1.0199999], rng.uniform(1.0, 1.02, 60)]):
+    for t, blend_from in [(t, 1.0) for t in np.concatenate([[1.0, 1.005, 1.0199999], rng.uniform(1.0, 1.02, 60)])] + \
+            [(t, 1.02) for t in rng.uniform(1.02, 1.04, 20)]:  # a plan taken a period after it was asked for
         q_new, task_new, q_old, task_old = np.empty(7), np.empty((3, 3)), np.empty(7), np.empty((3, 3))
         for plan, qo, to in ((new, q_new, task_new), (old, q_old, task_old)):
             sample_plan_task(t, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
                              plan.ee_jacobian_lin, qo, to)
-        x = (t - new.t0_s) / blend_s
+        x = (t - blend_from) / blend_s
         w = x * x * (3.0 - 2.0 * x)
         q_ref, task_ref = q_old + w * (q_new - q_old), task_old + w * (task_new - task_old)
         q_out, task_out = np.empty(7), np.empty((3, 3))
         sample_plan_blend(t, new.t0_s, new.dt_s, new.q_rad, new.dq_rad_s, new.ddq_rad_s2, new.ee_pos_m[0],
                           new.ee_jacobian_lin, old.t0_s, old.dt_s, old.q_rad, old.dq_rad_s, old.ddq_rad_s2,
-                          old.ee_pos_m[0], old.ee_jacobian_lin, blend_s, q_out, task_out)
+                          old.ee_pos_m[0], old.ee_jacobian_lin, blend_from, blend_s, q_out, task_out)
         assert np.array_equal(q_out, q_ref) and np.array_equal(task_out, task_ref), t
 
 

@@ -42,7 +42,7 @@ from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, Smoo
 from mmact_ctrl.control.smoothing import SmoothingStage
 from mmact_ctrl.control.view import ExecutorView
 from mmact_ctrl.executors import ChunkExecutor, make_executor
-from mmact_ctrl.mpc_worker import InlineMPC
+from mmact_ctrl.mpc_worker import DeferredMPC, InlineMPC
 from mmact_ctrl.reference import ChunkReference
 
 #: a measured external force over this at the TCP is contact: the chunk's correction is latched (ChunkStage), N (a held
@@ -138,7 +138,10 @@ class HybridController:
         # that arrives later than config.mpc.max_solve_ms; in simulated time none: results must not depend on load)
         mpc = self._mpc = TaskSpaceMPC(replace(self.config.mpc, max_solve_ms=math.inf), q_nominal_rad=self.model.home_q_rad)
         relative = self.smoothing and self.config.smoother.relative
-        return PlanTracker(self.config, self.model, InlineMPC(mpc), self.smoothed_reference, self.reference_positions,
+        delay = self.config.mpc_delay_s
+        worker = (InlineMPC(mpc) if delay is None  # the published results: solved at the tick that asks
+                  else DeferredMPC(replace(self.config.mpc, max_solve_ms=math.inf), self.model.home_q_rad, delay))
+        return PlanTracker(self.config, self.model, worker, self.smoothed_reference, self.reference_positions,
                            self.smoother.preview_pos_offset if relative else None)
 
     def _warm_up_qp(self) -> None:
@@ -215,6 +218,12 @@ class HybridController:
         inline; the previous worker is closed."""
         if self.tracker is not None:
             self.tracker.use_worker(worker)
+
+    def close(self) -> None:
+        """End the MPC's process, if it has one (``StackConfig.mpc_delay_s``); from then on the MPC is solved inline.
+        Safe to call twice."""
+        if self.tracker is not None and not isinstance(self.tracker.worker, InlineMPC):
+            self.tracker.use_worker(InlineMPC(self._mpc))
 
     def defer_mpc_updates(self, defer: bool) -> None:
         """The deadline order (``mmact_ctrl.tick_order``): the MPC's work after each command (:meth:`end_tick`)."""

@@ -71,6 +71,7 @@ class PlanTracker:
         self._good_plan_end_s = 0.0
         self._plan: MPCPlan | None = None
         self._prev_plan: MPCPlan | None = None
+        self._taken_s = 0.0  # when the plan's hand-over blend starts (see _take_newest)
         self._deferred: _Deferred | None = None
         self._next_s = self.config.mpc_phase_s
         z = np.zeros(3)
@@ -92,7 +93,7 @@ class PlanTracker:
         if t_s >= self._next_s - 1e-9:
             self._update_due(t_s, q_rad, dq_rad_s, terms)
             self._next_s = t_s + self.period_s
-        self._take_newest()
+        self._take_newest(t_s)
         plan = self._plan
         if plan is not None and (plan.ok or t_s < self._good_plan_end_s):
             q_post, task = self._sample(t_s, plan)
@@ -120,11 +121,14 @@ class PlanTracker:
         solve_us = self.worker.solve_us[-1] if len(self.worker.solve_us) > n_solved else 0.0
         self.after_us = max(self.offpath_us - solve_us, 0.0)
 
-    def _take_newest(self) -> None:
-        done = self.worker.poll()
+    def _take_newest(self, t_s: float) -> None:
+        done = self.worker.poll(t_s=t_s)
         if done is None:
             return
         t_asked, new_plan = done  # the newest finished plan takes over
+        # blended in from the plan's start (inline: now; in real time a plan 2 ms late has 18 ms of blend left), or
+        # from now, for a worker whose plans all come a fixed time late (a plan older than the blend would step in)
+        self._taken_s = t_s if getattr(self.worker, "blends_from_take", False) else new_plan.t0_s
         self._prev_plan, self._plan = self._plan, new_plan
         if self.recorded_plans is not None:
             self.recorded_plans.append((t_asked, new_plan.t0_s, new_plan.dt_s, np.array(new_plan.ee_pos_m)))
@@ -137,10 +141,11 @@ class PlanTracker:
         references ramps the torque the QP needs instead of stepping it."""
         q_post, task = np.empty(7), np.empty((3, 3))  # == plan.sample(t) and plan.sample_task(t), compiled
         prev = self._prev_plan
-        if prev is not None and t_s - plan.t0_s < self.config.mpc_blend_s:  # the smoothstep, compiled
+        if prev is not None and t_s - self._taken_s < self.config.mpc_blend_s:  # the smoothstep, compiled
             sample_plan_blend(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
                               plan.ee_jacobian_lin, prev.t0_s, prev.dt_s, prev.q_rad, prev.dq_rad_s, prev.ddq_rad_s2,
-                              prev.ee_pos_m[0], prev.ee_jacobian_lin, self.config.mpc_blend_s, q_post, task)
+                              prev.ee_pos_m[0], prev.ee_jacobian_lin, self._taken_s, self.config.mpc_blend_s, q_post,
+                              task)
         else:
             sample_plan_task(t_s, plan.t0_s, plan.dt_s, plan.q_rad, plan.dq_rad_s, plan.ddq_rad_s2, plan.ee_pos_m[0],
                              plan.ee_jacobian_lin, q_post, task)
