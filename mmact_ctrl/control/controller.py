@@ -142,7 +142,8 @@ class HybridController:
         worker = (InlineMPC(mpc) if delay is None  # the published results: solved at the tick that asks
                   else DeferredMPC(replace(self.config.mpc, max_solve_ms=math.inf), self.model.home_q_rad, delay))
         return PlanTracker(self.config, self.model, worker, self.smoothed_reference, self.reference_positions,
-                           self.smoother.preview_pos_offset if relative else None)
+                           self.smoother.preview_pos_offset if relative else None,
+                           self.descent.lowest_z_m if self.descent is not None else None)
 
     def _warm_up_qp(self) -> None:
         """The QP's rare paths (DAQP's rescue, the fallback) run once now, not for the first time inside an episode."""

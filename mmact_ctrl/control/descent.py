@@ -52,6 +52,8 @@ BRAKE_M_S2 = 5.0
 TCP_LEAD_S = 0.01
 #: the tracking's time constant, s (``1 / kd_pos``): the TCP's speed is judged where it will be this much later
 TRACK_TAU_S = 0.025
+#: the step of the descent's integration in :meth:`DescentGovernor.lowest_z_m`, s
+PREVIEW_STEP_S = 0.005
 
 
 class DescentGovernor:
@@ -79,6 +81,23 @@ class DescentGovernor:
         if z_m > self.low_m:
             s = min(s, self.speed_m_s + math.sqrt(2.0 * BRAKE_M_S2 * max(z_m - self.high_m, 0.0)))
         return s
+
+    def lowest_z_m(self, delays_s: np.ndarray) -> np.ndarray | None:
+        """The lowest heights (m) the reference can reach ``delays_s`` (increasing, s) from now, coming down from
+        where it is now at the fastest descent allowed on the way; None before the first tick. The MPC's preview is
+        held above them (:class:`~mmact_ctrl.control.plan_tracker.PlanTracker`): a plan that counts on a descent the
+        governor will not allow trades the other axes for it (see ``docs/ARCHITECTURE.md``)."""
+        if self.z_m is None:
+            return None
+        out = np.empty(len(delays_s))
+        z, t_s = self.z_m, 0.0
+        for i, delay_s in enumerate(delays_s):
+            while t_s < delay_s - 1e-12:
+                h = min(PREVIEW_STEP_S, delay_s - t_s)
+                z = max(z - self.allowed_speed_m_s(z) * h, min(self.floor_m, z))
+                t_s += h
+            out[i] = z
+        return out
 
     def __call__(self, pos_m: np.ndarray, vel_m_s: np.ndarray, acc_m_s2: np.ndarray,
                  tcp_z_m: float | None = None, tcp_vz_m_s: float = 0.0,
