@@ -9,6 +9,8 @@
 # guarded descent, the empty-grip gate and the jump that no longer teleports a cube into the hand;
 # the stiff and compliance pick lines and pick's fault suite again (stop 51, late 2026-12-07) with point 9: pick's
 # impedance capping only the push into the contact, the blind lead at the band's speed while touching;
+# every pick line and pick's fault suite again (stop 53, 2026-12-07) with the MPC's preview held above the descent
+# governor's reach (open loop unchanged bit for bit: it has no MPC);
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
