@@ -49,9 +49,10 @@ class PlanTracker:
         smoothed: the reference chain up to Ruckig, ``smoothed(t_s) -> SmoothedSample`` (advances the smoother).
         preview: the reference's positions (N, 3) at many times, floored (the MPC's preview).
         preview_offset: Ruckig's offset still to be smoothed away at many future delays (N, 3), or None.
-        preview_low: the lowest heights the reference the QP tracks can reach at many future delays (N,), or None
-            (or a callable that returns None: no bound now): the descent governor's
-            (:meth:`~mmact_ctrl.control.descent.DescentGovernor.lowest_z_m`); the preview is held above them.
+        preview_low: the lowest heights the reference the QP tracks can reach at many future delays (N,), None when
+            nothing bounds them yet (the descent governor's
+            :meth:`~mmact_ctrl.control.descent.DescentGovernor.lowest_z_m`); the preview is held above them. None
+            (reach, insert: no governor): the preview as it was.
     """
 
     def __init__(self, config: StackConfig, model: PandaModel, worker, smoothed: Callable[[float], SmoothedSample],
@@ -172,9 +173,11 @@ class PlanTracker:
         if self._preview_offset is not None:
             preview = preview + self._preview_offset(taus)
             preview[:, 2] = np.maximum(preview[:, 2], self.config.tcp_floor_m)
+        # not below what the descent governor will let the reference reach (a copy: the executor's array may be its
+        # own cache)
         low = self._preview_low(taus) if self._preview_low is not None else None
-        if low is not None:  # not below what the descent governor will let the reference reach (a copy: the
-            preview = np.array(preview)  # executor's array may be its own cache)
+        if low is not None:
+            preview = np.array(preview)
             preview[:, 2] = np.maximum(preview[:, 2], low)
         q0, dq0, pos0, rot0, jac0 = self._plan_start(t_s, q_rad, dq_rad_s, terms)
         return (np.array(q0), np.array(dq0), np.array(pos0), np.array(jac0), preview, orientation_error(rot_des, rot0))
