@@ -78,6 +78,11 @@ class StackConfig:
             (``mmact_ctrl.mpc_worker.DeferredMPC``: deterministic whatever the load; 0 gives the inline results
             bit for bit), so the solve leaves the loop's thread, at the cost of a plan that starts from a state that
             old. Call ``HybridController.close()`` when done (the process is a daemon: it ends with the program).
+        mpc_preview_governed: hybrid with MPC and a descent band (pick): the MPC's preview is held above the heights
+            the descent governor lets the reference reach (``DescentGovernor.lowest_z_m``; README, Contact, point
+            10). False: the chunk's own descent, as every pick figure before stop 53 was made (a plan that counted on
+            it traded the other axes for it: the open hand came down 12-25 mm off the cube sideways); kept so that the
+            faults read on those runs can be reproduced and the bound's effect measured.
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
         guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
@@ -138,6 +143,7 @@ class StackConfig:
     mpc_blend_s: float = 0.02
     mpc_phase_s: float = 0.0
     mpc_delay_s: float | None = None
+    mpc_preview_governed: bool = True
     residual_checkpoint: str = ""
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N

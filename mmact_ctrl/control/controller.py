@@ -36,7 +36,7 @@ from mmact_ctrl.control.empty_grip import EmptyGripGate
 from mmact_ctrl.control.empty_hand import EmptyHandGate
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
-from mmact_ctrl.control.grasp_reflex import GraspReflex, reflex_refusal
+from mmact_ctrl.control.grasp_reflex import CLOSING_BELOW_M, GraspReflex, reflex_refusal
 from mmact_ctrl.control.plan_tracker import PlanTracker
 from mmact_ctrl.control.samples import ControllerCounters, ReferenceSample, SmoothedSample, TickOutput
 from mmact_ctrl.control.smoothing import SmoothingStage
@@ -143,7 +143,8 @@ class HybridController:
                   else DeferredMPC(replace(self.config.mpc, max_solve_ms=math.inf), self.model.home_q_rad, delay))
         return PlanTracker(self.config, self.model, worker, self.smoothed_reference, self.reference_positions,
                            self.smoother.preview_pos_offset if relative else None,
-                           self.descent.lowest_z_m if self.descent is not None else None)
+                           self.descent.lowest_z_m if self.descent is not None and self.config.mpc_preview_governed
+                           else None)
 
     def _warm_up_qp(self) -> None:
         """The QP's rare paths (DAQP's rescue, the fallback) run once now, not for the first time inside an episode."""
@@ -417,11 +418,18 @@ class HybridController:
         return self.filter if box is None else BoxedPrediction(self.filter, box[0], box[1])
 
     def _object_in_hand(self) -> bool:
-        """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``)."""
+        """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``), or,
+        with fingers that measure something in them (wider than ``config.empty_grip_below_m``: closed on an object, not
+        on nothing), still in their grip (``GraspReflex.holding``)."""
         terms = getattr(self, "terms", None)
         if terms is None or not self.filter.initialized:
             return False
-        return GraspReflex.between(terms.pos_m, self.filter.predict_pos(self.filter.t_s))
+        obj = self.filter.predict_pos(self.filter.t_s)
+        if GraspReflex.between(terms.pos_m, obj):
+            return True
+        empty, opening = self.config.empty_grip_below_m, self._gripper_meas_m
+        return (empty is not None and opening is not None and empty < opening < CLOSING_BELOW_M
+                and GraspReflex.holding(terms.pos_m, obj))
 
     def _object_now(self, t_s: float) -> np.ndarray | None:
         """The target estimate now (the grasp reflex's object), None before the first measurement."""

@@ -19,6 +19,11 @@ from mmact_ctrl.control.chunk_stage import GRIPPER_CLOSING_BELOW_M, GRIPPER_OPEN
 #: the object is between the fingers when its estimate is within these of the TCP: across the fingers' faces
 #: (horizontal) and along them (vertical), m; a 4.5 cm cube in the 8 cm opening has 1.75 cm to spare a side
 BETWEEN_XY_M, BETWEEN_Z_M = 0.012, 0.015
+#: an object the closed fingers measure (they stopped on it) stays in the pads' grip this far off the TCP
+#: horizontally, m: the pads centre it along the fingers' axis, but across them it may sit anywhere the pads still
+#: press its faces (half a 4.5 cm object plus the pads' half width, 8.5 mm, less a margin). A held cube 18-24 mm
+#: across the axis was taken for a miss: the correction was let go and swept the hand at 0.5-0.8 m/s
+HOLD_XY_M = 0.03
 #: a gripper command below this closes the gripper, and the open and closed commands, m (the chunk stage's)
 CLOSING_BELOW_M, OPEN_M = GRIPPER_CLOSING_BELOW_M, GRIPPER_OPEN_M
 CLOSED_M = 0.0
@@ -58,6 +63,13 @@ class GraspReflex:
         if self.closed:
             return CLOSED_M
         return gripper_cmd_m if gripper_cmd_m >= CLOSING_BELOW_M else OPEN_M
+
+    @staticmethod
+    def holding(tcp_pos_m: np.ndarray, object_pos_m: np.ndarray) -> bool:
+        """Whether an object the fingers have closed on (their measured opening says so: the caller's) is still in
+        the grip: within ``HOLD_XY_M`` of the TCP horizontally, ``BETWEEN_Z_M`` vertically."""
+        d = np.asarray(object_pos_m, dtype=float) - np.asarray(tcp_pos_m, dtype=float)
+        return bool(np.hypot(d[0], d[1]) < HOLD_XY_M and abs(d[2]) < BETWEEN_Z_M)
 
     @staticmethod
     def between(tcp_pos_m: np.ndarray, object_pos_m: np.ndarray) -> bool:

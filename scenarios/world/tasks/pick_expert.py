@@ -5,8 +5,8 @@ It reads what one observation shows (the TCP, the gripper's opening, where the c
 velocity``, where it was 0.1 s earlier) and plans the rest of the grasp from there; nothing is remembered between
 chunks, so whatever happened (a missed grasp, a drop) is planned from anew:
 
-- **holding** (the gripper has closed on the cube, which is between the fingers): lift it ``LIFT_TO_M`` above the
-  carrier and hold it there, gripper closed;
+- **holding** (the gripper has closed on the cube, which is between the fingers, or still in the pads' grip off
+  the TCP across them, ``HELD_XY_M``): lift it ``LIFT_TO_M`` above the carrier and hold it there, gripper closed;
 - **closing** (the gripper is closing, the cube between the fingers): stay with the cube (its predicted course),
   keep closing, then lift;
 - **missed** (the gripper is closed but the cube is not between the fingers): open and rise to the approach height;
@@ -42,6 +42,11 @@ LIFT_TO_M = 0.12
 BETWEEN_XY_M, BETWEEN_Z_M = 0.02, 0.02
 #: the gripper is closing below this opening, closed on a cube below this one, m
 CLOSING_BELOW_M, CLOSED_ON_CUBE_M = 0.075, 2 * CUBE_HALF_M + 0.006
+#: fingers closed on a cube measure at least this opening (less: closed on nothing), m; a cube they hold stays in
+#: the pads' grip this far off the TCP horizontally, m (the pads centre it along the fingers' axis, and across it the
+#: pads press its faces up to half its width plus theirs): a cube held 2-3 cm across the axis, lifted 12 cm, was taken
+#: for a missed grasp, and the gripper reopened and dropped it
+ON_CUBE_ABOVE_M, HELD_XY_M = 2 * CUBE_HALF_M - 0.01, 0.03
 #: the descent starts from above the cube: the TCP within this of its course horizontally, and at most this above
 #: the approach height, m
 ABOVE_XY_M, ABOVE_Z_M = 0.015, 0.02
@@ -132,7 +137,9 @@ class PickExpert(ExpertBase):
         vel = cube_velocity_m_s(cfg, obs)
         course = predicted_course_m(cfg, cube, vel, times)  # where the cube will be at each waypoint's time
         tcp = np.asarray(obs.ee_pos_m, dtype=float)
-        between = (np.linalg.norm((cube - tcp)[:2]) < BETWEEN_XY_M and abs(cube[2] - tcp[2]) < BETWEEN_Z_M)
+        xy, dz = float(np.linalg.norm((cube - tcp)[:2])), abs(cube[2] - tcp[2])
+        held = ON_CUBE_ABOVE_M < obs.gripper_m < CLOSED_ON_CUBE_M and xy < HELD_XY_M
+        between = (xy < BETWEEN_XY_M or held) and dz < BETWEEN_Z_M
         if obs.gripper_m < CLOSING_BELOW_M and between:
             actions = self._hold_and_lift(tcp, course, times, closed=obs.gripper_m < CLOSED_ON_CUBE_M)
         elif obs.gripper_m < CLOSING_BELOW_M:
