@@ -83,6 +83,12 @@ class StackConfig:
             10). False: the chunk's own descent, as every pick figure before stop 53 was made (a plan that counted on
             it traded the other axes for it: the open hand came down 12-25 mm off the cube sideways); kept so that the
             faults read on those runs can be reproduced and the bound's effect measured.
+        latch_on_grip: the grasp latch (``ChunkStage``: the chunk's correction held while the gripper is commanded
+            closed on the object) waits until the fingers are on the object: not while their measured opening is wide
+            open or still shrinking at the free closing speed (``mmact_ctrl.control.fingers``; README, Contact, point
+            12). False: latched from the closing command, as every pick figure before stop 54 was made (the hand
+            went on along the chunk's course for the 0.175 s the fingers take to close, while the object did not).
+            Without a measured opening (reach) nothing changes.
         contact_force_limit_n: the largest external force on the robot that is not a violation, N
             (``controllers.contact_safety``: counted on every tick where the world reports a wrench).
         guard_yield_m_s_per_n: how fast the contact-force guard's reference yields per newton over its threshold,
@@ -144,6 +150,7 @@ class StackConfig:
     mpc_phase_s: float = 0.0
     mpc_delay_s: float | None = None
     mpc_preview_governed: bool = True
+    latch_on_grip: bool = True
     residual_checkpoint: str = ""
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N

@@ -143,14 +143,15 @@ def test_a_compliant_hand_that_hit_the_belt_lifts_itself_out(monkeypatch):
     (250 N). With the impedance's force capped in magnitude it could not lift itself out against the belt dragging
     its fingers (20 N up): 620 ticks over 30 N and 199 past the joint position limits. Capped only on the push into
     the contact, the hand lifts off. The fall no longer happens on this seed (stop 53: the MPC's preview bound, the
-    held cube kept in hand by the expert and the latch), so the episode is replayed as the run that found it had it:
-    the preview unbounded (``mpc_preview_governed``), the latch and the expert taking a held cube off the TCP's centre
-    for a miss (``empty_grip_below_m`` None, ``pick_expert.HELD_XY_M`` 0)."""
+    held cube kept in hand by the expert and the latch; stop 54: the latch waiting for the grip), so the episode is
+    replayed as the run that found it had it: the preview unbounded (``mpc_preview_governed``), the latch from the
+    closing command (``latch_on_grip`` False), the latch and the expert taking a held cube off the TCP's centre for a
+    miss (``empty_grip_below_m`` None, ``pick_expert.HELD_XY_M`` 0)."""
     from pick_episode import run_pick_episode
     import scenarios.world.tasks.pick_expert as pick_expert
 
     monkeypatch.setattr(pick_expert, "HELD_XY_M", 0.0)
-    then = dict(compliance=True, mpc_preview_governed=False, empty_grip_below_m=None)
+    then = dict(compliance=True, mpc_preview_governed=False, latch_on_grip=False, empty_grip_below_m=None)
     log, ctl, cfg = run_pick_episode("linear", "0.4", 1041, "6", **then)
     assert cfg.compliance_caps_pressing and ctl.compliance.switches >= 1
     m = episode_metrics(log)

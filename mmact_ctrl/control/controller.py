@@ -34,6 +34,7 @@ from mmact_ctrl.control.compliance_gate import ComplianceGate
 from mmact_ctrl.control.descent import DescentGovernor
 from mmact_ctrl.control.empty_grip import EmptyGripGate
 from mmact_ctrl.control.empty_hand import EmptyHandGate
+from mmact_ctrl.control.fingers import FingerWatch
 from mmact_ctrl.control.floor import FloorClamp
 from mmact_ctrl.control.force_guard import ContactForceGuard
 from mmact_ctrl.control.grasp_reflex import CLOSING_BELOW_M, GraspReflex, reflex_refusal
@@ -111,6 +112,7 @@ class HybridController:
                            if config.empty_grip_below_m is not None and config.descent_band_m is not None
                            and config.close_below_m is not None and not layers.reads_target else None)
         self._gripper_meas_m: float | None = None  # the fingers' measured opening (sense_wrench), m
+        self.fingers = FingerWatch(config.dt_s)  # whether they still close on nothing (the grasp latch waits)
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -262,6 +264,7 @@ class HybridController:
         if self.empty_grip is not None:
             self.empty_grip.reset()
         self._gripper_meas_m = None
+        self.fingers.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
         self.filter = TargetEstimator(self.filter.config)
@@ -403,6 +406,7 @@ class HybridController:
         ``gripper_m`` (m; None: not given). Contact (the force over ``CONTACT_LATCH_N``) latches the chunk's
         correction; the guard sees the force; the empty-grip gate the opening."""
         self._gripper_meas_m = gripper_m
+        self.fingers.update(gripper_m)
         force = np.asarray(wrench, dtype=float)[:3]
         self._force_n = float(np.linalg.norm(force))
         self.chunk.touching = self._force_n > CONTACT_LATCH_N
@@ -420,9 +424,12 @@ class HybridController:
     def _object_in_hand(self) -> bool:
         """Whether the target estimate is between the fingers at the last tick's TCP (``GraspReflex.between``), or,
         with fingers that measure something in them (wider than ``config.empty_grip_below_m``: closed on an object, not
-        on nothing), still in their grip (``GraspReflex.holding``)."""
+        on nothing), still in their grip (``GraspReflex.holding``). With ``config.latch_on_grip``, never while the
+        fingers are measured wide open or still closing freely (``FingerWatch``: nothing is held yet)."""
         terms = getattr(self, "terms", None)
         if terms is None or not self.filter.initialized:
+            return False
+        if self.config.latch_on_grip and self.fingers.on_nothing_yet:  # not held yet: the object moves with the world
             return False
         obj = self.filter.predict_pos(self.filter.t_s)
         if GraspReflex.between(terms.pos_m, obj):
