@@ -111,8 +111,8 @@ class HybridController:
         self.empty_grip = (EmptyGripGate(config.empty_grip_below_m, config.descent_band_m[1], config.dt_s)
                            if config.empty_grip_below_m is not None and config.descent_band_m is not None
                            and config.close_below_m is not None and not layers.reads_target else None)
-        self._gripper_meas_m: float | None = None  # the fingers' measured opening (sense_wrench), m
-        self.fingers = FingerWatch(config.dt_s)  # whether they still close on nothing (the grasp latch waits)
+        #: the fingers' measured opening (sense_wrench; ``opening_m``, m) and whether they still close on nothing
+        self.fingers = FingerWatch(config.dt_s)
         # With MPC, Ruckig steps once per MPC period (its output is only read there); else every control tick.
         self.smoother = TaskSpaceSmoother(replace(sc, dt_s=1.0 / config.mpc.rate_hz if self.use_mpc else config.dt_s))
         self.smooth = SmoothingStage(self.smoother if self.smoothing else None, self.floor, self.rot_nominal)
@@ -263,7 +263,6 @@ class HybridController:
             self.empty_hand.reset()
         if self.empty_grip is not None:
             self.empty_grip.reset()
-        self._gripper_meas_m = None
         self.fingers.reset()
         self.smoother.reset(pos, rotvec)
         self.smooth.smoothed_pos_m = None
@@ -385,7 +384,7 @@ class HybridController:
         if self.empty_hand is not None:  # a closing that found nothing: up before sideways
             pos, vel, acc = self.empty_hand(pos, vel, acc, terms.pos_m, obj, self.closing_gate.closing_ticks)
         if self.empty_grip is not None:  # blind: fingers that closed on nothing lift the hand at once
-            pos, vel, acc = self.empty_grip(pos, vel, acc, float(terms.pos_m[2]), self._gripper_meas_m,
+            pos, vel, acc = self.empty_grip(pos, vel, acc, float(terms.pos_m[2]), self.fingers.opening_m,
                                             self.closing_gate.closing_ticks)
         if self.force_guard.active:  # pressing on something (``ContactForceGuard``): the reference yields
             pos = self.force_guard.apply(pos)
@@ -405,7 +404,6 @@ class HybridController:
         only where the world measures one: in reach nothing of this runs), and the fingers' measured opening
         ``gripper_m`` (m; None: not given). Contact (the force over ``CONTACT_LATCH_N``) latches the chunk's
         correction; the guard sees the force; the empty-grip gate the opening."""
-        self._gripper_meas_m = gripper_m
         self.fingers.update(gripper_m)
         force = np.asarray(wrench, dtype=float)[:3]
         self._force_n = float(np.linalg.norm(force))
@@ -434,7 +432,7 @@ class HybridController:
         obj = self.filter.predict_pos(self.filter.t_s)
         if GraspReflex.between(terms.pos_m, obj):
             return True
-        empty, opening = self.config.empty_grip_below_m, self._gripper_meas_m
+        empty, opening = self.config.empty_grip_below_m, self.fingers.opening_m
         return (empty is not None and opening is not None and empty < opening < CLOSING_BELOW_M
                 and GraspReflex.holding(terms.pos_m, obj))
 

@@ -68,10 +68,14 @@ class GraspReflex:
     def holding(tcp_pos_m: np.ndarray, object_pos_m: np.ndarray) -> bool:
         """Whether an object the fingers have closed on (their measured opening says so: the caller's) is still in
         the grip: within ``HOLD_XY_M`` of the TCP horizontally, ``BETWEEN_Z_M`` vertically."""
-        d = np.asarray(object_pos_m, dtype=float) - np.asarray(tcp_pos_m, dtype=float)
-        return bool(np.hypot(d[0], d[1]) < HOLD_XY_M and abs(d[2]) < BETWEEN_Z_M)
+        return GraspReflex._within(tcp_pos_m, object_pos_m, HOLD_XY_M)
 
     @staticmethod
     def between(tcp_pos_m: np.ndarray, object_pos_m: np.ndarray) -> bool:
+        """Whether the object is between the fingers: within ``BETWEEN_XY_M`` / ``BETWEEN_Z_M`` of the TCP."""
+        return GraspReflex._within(tcp_pos_m, object_pos_m, BETWEEN_XY_M)
+
+    @staticmethod
+    def _within(tcp_pos_m: np.ndarray, object_pos_m: np.ndarray, xy_m: float) -> bool:
         d = np.asarray(object_pos_m, dtype=float) - np.asarray(tcp_pos_m, dtype=float)
-        return bool(np.hypot(d[0], d[1]) < BETWEEN_XY_M and abs(d[2]) < BETWEEN_Z_M)
+        return bool(np.hypot(d[0], d[1]) < xy_m and abs(d[2]) < BETWEEN_Z_M)
