@@ -2,11 +2,16 @@
 
     python -m mmact_ctrl.bench [--json PATH] [--calls N]
     python -m mmact_ctrl.bench --floor [--floor-args "--source expert"] [--json PATH]
+    python -m mmact_ctrl.bench --sweep [--sweep-args "--workers 1 2"] [--json PATH]
 
 ``--floor``: the floor of the command path (``mmact_ctrl.bench_floor``): the bare calls a tick cannot avoid
 (``mj_step``, Pinocchio's terms, OSQP's warm-started solve, the safety check) timed in tight loops on the inputs of
 a recorded episode of the main job, beside our tick, the episode's wall time per simulated ms and, when mink is
 installed, mink's ``solve_ik`` on the same Panda, all in one run.
+
+``--sweep``: the studies' speed (``scenarios.sweep_scaling``): the same sweep grid with 1 and 2 workers (and on Ray
+with ``--sweep-args "--ray-address auto"``), its episodes per CPU-second of the whole process tree, the speed-up, and
+whether the results are identical run for run.
 
 Components: ``pinocchio`` (all robot terms for one state), ``qp`` (build + OSQP solve),
 ``ruckig`` (one smoother step, position and orientation), ``kf`` (one filter step),
@@ -201,7 +206,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--floor-episodes", type=int, default=3, help="--floor: timed episodes (seeds 3, 4, ...)")
     p.add_argument("--floor-recorder", default="scenarios.bench_floor:record_main_job",
                    help="--floor: module:function(extra_args, episodes, seed, duration_s) -> FloorRecording")
+    p.add_argument("--sweep", action="store_true",
+                   help="the sweep's episodes per CPU-second and its scaling over workers (see above)")
+    p.add_argument("--sweep-args", default="", metavar="SWITCHES",
+                   help="--sweep: switches of python -m scenarios.sweep_scaling (default: the --quick grid, 1 and 2 "
+                        "workers)")
+    p.add_argument("--sweep-runner", default="scenarios.sweep_scaling:main", help="--sweep: module:function(argv)")
     args = p.parse_args(argv)
+    if args.sweep:
+        import shlex
+
+        return _load(args.sweep_runner)(shlex.split(args.sweep_args) + (["--json", args.json] if args.json else []))
     if args.calls < 10 or args.duration_s <= 0:
         p.error(f"--calls must be >= 10 and --duration-s > 0, got {args.calls} and {args.duration_s}")
     if args.floor:

@@ -13,9 +13,8 @@ python -m scenarios.moving_target --mode hybrid --target linear --episodes 3 --s
 for i in 1 2; do for f in --no-lookahead ""; do
   python -m scenarios.moving_target --mode hybrid --target linear --episodes 4 --seed 3 --quiet $f --json out/main_job$f.json
 done; done
-# the sweep's scaling: 75 episodes with 1 and with 2 workers (wall time; results identical)
-/usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep1 --workers 1 --quiet
-/usr/bin/time -f "%e s wall" python -m scenarios.sweep --quick --out out/sweep2 --workers 2 --quiet
+# the sweep's scaling: 75 episodes with 1 and with 2 workers, the whole process tree's CPU time, results compared
+# (stop 55: scenarios.sweep_scaling; before it /usr/bin/time, which does not count the fork server's workers)
+python -m mmact_ctrl.bench --sweep --json sweep_quick.json > sweep_quick.txt
 # and on a 150-episode study (open_loop, receding, hybrid x linear, reversal x 25 seeds, 6 s)
-/usr/bin/time -f "%e s wall" python -m scenarios.sweep --grid scale_grid.json --out out/scale1 --workers 1 --quiet
-/usr/bin/time -f "%e s wall" python -m scenarios.sweep --grid scale_grid.json --out out/scale2 --workers 2 --quiet
+python -m mmact_ctrl.bench --sweep --sweep-args "--grid scale_grid.json" --json sweep_scale_grid.json > sweep_scale_grid.txt
