@@ -15,6 +15,10 @@ for i in 1 2; do for f in --no-lookahead ""; do
 done; done
 # the sweep's scaling: 75 episodes with 1 and with 2 workers, the whole process tree's CPU time, results compared
 # (stop 55: scenarios.sweep_scaling; before it /usr/bin/time, which does not count the fork server's workers)
-python -m mmact_ctrl.bench --sweep --json sweep_quick.json > sweep_quick.txt
-# and on a 150-episode study (open_loop, receding, hybrid x linear, reversal x 25 seeds, 6 s)
-python -m mmact_ctrl.bench --sweep --sweep-args "--grid scale_grid.json" --json sweep_scale_grid.json > sweep_scale_grid.txt
+python -m mmact_ctrl.bench --sweep --json sweep_quick_local.json > sweep_quick_local.txt
+# and on a local Ray cluster of 2 CPUs too (it idles beside the local runs), on --quick and on a 150-episode study
+# (open_loop, receding, hybrid x linear, reversal x 25 seeds, 6 s)
+ray start --head --num-cpus 2 --include-dashboard=false
+python -m mmact_ctrl.bench --sweep --sweep-args "--ray-address auto" --json sweep_quick.json > sweep_quick.txt
+python -m mmact_ctrl.bench --sweep --sweep-args "--grid scale_grid.json --ray-address auto" --json sweep_scale_grid.json > sweep_scale_grid.txt
+ray stop
