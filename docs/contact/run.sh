@@ -46,3 +46,7 @@ python -m scenarios.bench_tasks --episodes 5 --json bench_tasks.json > bench_tas
 # the fault suite on each task
 python -m scenarios.faults --quick --task pick --out out/faults_pick
 python -m scenarios.faults --quick --task insert --out out/faults_insert
+# stop 55: how often pick goes over 30 N, on 200 seeds no one tuned on (6050-6249; README, Contact, "How often");
+# not part of the tables above (about 25 min on 2 cores)
+# python -m scenarios.moving_target --source expert --episodes 200 --seed 6050 --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid [--filter imm] --json out/fresh_reversal_0.2[_imm].json > fresh_reversal_0.2[_imm].txt
+# python -m scenarios.moving_target --source expert --episodes 200 --seed 6050 --duration-s 6 --task pick --target linear --speed 0.4 --mode open_loop hybrid --json out/fresh_linear_0.4.json > fresh_linear_0.4.txt
