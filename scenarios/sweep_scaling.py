@@ -31,9 +31,6 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-#: results.csv columns that are timings of the host, not results (they differ from run to run)
-TIMING_SUFFIXES: tuple[str, ...] = ("_us_median", "_us_p99", "_ms_median", "_ms_per_sim_s")
-TIMING_COLUMNS: frozenset[str] = frozenset({"realtime_factor"})
 #: the columns that name a cell besides the sweep's axes (``scenarios.sweep.study.AXES``, ``TASK_AXES``): rows are
 #: matched on them all
 MORE_KEY_COLUMNS: tuple[str, ...] = ("duration_s", "source", "checkpoint", "preset")
@@ -60,8 +57,11 @@ class ScalingRun:
 
 
 def is_timing(column: str) -> bool:
-    """Whether a results.csv column is a timing of the host (excluded from the comparison)."""
-    return column in TIMING_COLUMNS or column.endswith(TIMING_SUFFIXES)
+    """Whether a results.csv column is a timing of the host (excluded from the comparison): the golden record's
+    wall-clock figures (``scenarios.golden_record.WALL_CLOCK_KEYS``)."""
+    from scenarios.golden_record import WALL_CLOCK_KEYS
+
+    return column in WALL_CLOCK_KEYS
 
 
 def key_columns() -> tuple[str, ...]:
@@ -96,8 +96,9 @@ def run_tree_measured(cmd: list[str], poll_s: float) -> tuple[int, float, float]
     import psutil
 
     seen: dict[tuple[int, float], float] = {}
+    err = tempfile.TemporaryFile()  # a file, not a pipe: a pipe read only at the end fills and stalls the child
     t0 = time.perf_counter()
-    proc = psutil.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = psutil.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
     while True:
         try:
             tree = [proc, *proc.children(recursive=True)]
@@ -114,7 +115,9 @@ def run_tree_measured(cmd: list[str], poll_s: float) -> tuple[int, float, float]
             break
         time.sleep(poll_s)
     wall_s = time.perf_counter() - t0
-    stderr = proc.stderr.read().decode(errors="replace") if proc.stderr is not None else ""
+    err.seek(0)
+    stderr = err.read().decode(errors="replace")
+    err.close()
     if proc.returncode != 0:
         tail = stderr.strip().splitlines()[-1:] or ["(no output)"]
         raise SystemExit(f"sweep_scaling: {' '.join(cmd[2:])} failed (exit {proc.returncode}): {tail[0]}")
