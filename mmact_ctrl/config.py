@@ -96,6 +96,10 @@ class StackConfig:
         empty_hand_after_s: with a descent band, in a mode that reads the object: once the gripper has been closing
             this long with the object's estimate not between the fingers, the closed hand rises where it is to the
             band's top before it goes on (``mmact_ctrl.control.empty_hand``), s; None: no such gate.
+        empty_hand_beside_m: with the empty-hand gate and ``capture_tol_m``: the gate also acts as soon as the
+            fingers' measured opening can no longer take in the object and the object's estimate is off the TCP
+            across the fingers' axis by more than this (beside the fingers: ``EmptyHandGate.missed_on_opening``), not
+            only after ``empty_hand_after_s``, m; None: only after it. Without a measured opening nothing changes.
         empty_grip_below_m: with a descent band, in a mode that does not read the object: fingers commanded closed
             and measured closer than this found nothing, and the hand rises to the band's top at once
             (``mmact_ctrl.control.empty_grip``), m; None: no such gate.
@@ -155,6 +159,7 @@ class StackConfig:
     contact_force_limit_n: float = 30.0
     guard_yield_m_s_per_n: float = YIELD_M_S_PER_N
     empty_hand_after_s: float | None = None
+    empty_hand_beside_m: float | None = None
     empty_grip_below_m: float | None = None
     grasp_reflex: bool = False
     compliance: bool = False
@@ -205,6 +210,9 @@ class StackConfig:
         if self.empty_hand_after_s is not None and not (math.isfinite(self.empty_hand_after_s)
                                                         and self.empty_hand_after_s > 0):
             raise ValueError(f"empty_hand_after_s must be a time > 0 s or None, got {self.empty_hand_after_s}")
+        if self.empty_hand_beside_m is not None and not (math.isfinite(self.empty_hand_beside_m)
+                                                         and self.empty_hand_beside_m > 0):
+            raise ValueError(f"empty_hand_beside_m must be a distance > 0 m or None, got {self.empty_hand_beside_m}")
         if self.close_below_m is not None and not math.isfinite(self.close_below_m):
             raise ValueError(f"close_below_m must be a finite height in m or None, got {self.close_below_m}")
         if self.descent_band_m is not None:

@@ -105,7 +105,10 @@ class HybridController:
         self.capture = (CaptureGate(config.capture_tol_m, config.capture_clear_m, config.descent_band_m[1], config.dt_s)
                         if config.capture_tol_m is not None and config.descent_band_m is not None
                         and layers.reads_target else None)  # the hand over the object's top until it is between
-        self.empty_hand = (EmptyHandGate(config.empty_hand_after_s, config.descent_band_m[1], config.dt_s)
+        self.empty_hand = (EmptyHandGate(config.empty_hand_after_s, config.descent_band_m[1], config.dt_s,
+                                         opening_tol_m=(config.capture_tol_m if config.empty_hand_beside_m is not None
+                                                        else None),
+                                         beside_m=config.empty_hand_beside_m or 0.0)
                            if config.empty_hand_after_s is not None and config.descent_band_m is not None
                            and config.close_below_m is not None and layers.reads_target else None)
         self.empty_grip = (EmptyGripGate(config.empty_grip_below_m, config.descent_band_m[1], config.dt_s)
@@ -382,7 +385,11 @@ class HybridController:
         if self.capture is not None:  # not down past the object's top unless it will pass between the fingers
             pos, vel, acc = self.capture(pos, vel, acc, terms.pos_m, terms.rot, obj)
         if self.empty_hand is not None:  # a closing that found nothing: up before sideways
-            pos, vel, acc = self.empty_hand(pos, vel, acc, terms.pos_m, obj, self.closing_gate.closing_ticks)
+            closing = self.closing_gate.closing_ticks
+            rel_vel = (self.filter.predict_vel(t_s) - terms.vel[:3]  # only while the fingers close on something
+                       if closing > 0 and obj is not None and self.empty_hand.opening_tol_m is not None else None)
+            pos, vel, acc = self.empty_hand(pos, vel, acc, terms.pos_m, obj, closing, terms.rot,
+                                            self.fingers.opening_m, rel_vel)
         if self.empty_grip is not None:  # blind: fingers that closed on nothing lift the hand at once
             pos, vel, acc = self.empty_grip(pos, vel, acc, float(terms.pos_m[2]), self.fingers.opening_m,
                                             self.closing_gate.closing_ticks)

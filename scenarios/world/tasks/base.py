@@ -34,6 +34,10 @@ class Task(Protocol):
         empty_hand_after_s: a closing that has gone on this long with the object not between the fingers found
             nothing: the closed hand rises before it goes on, in a mode that reads the object
             (``StackConfig.empty_hand_after_s``), s; None: no such gate.
+        empty_hand_beside_m: with ``empty_hand_after_s`` and ``capture_tol_m``: a closing whose measured opening can
+            no longer take in the object, with the object off the TCP across the fingers' axis by more than this
+            (beside the fingers), found nothing at once (``StackConfig.empty_hand_beside_m``), m; None: only after
+            ``empty_hand_after_s``.
         landing_speed_m_s: with a descent band, the speed at which a mode that does not read the object passes the
             band (``StackConfig.landing_speed_m_s``), m/s; None: no band in those modes.
         empty_grip_below_m: fingers closed closer than this found nothing: the hand rises at once, in a mode that
@@ -54,6 +58,7 @@ class Task(Protocol):
     mpc_z_weight: float
     guard_yield_m_s_per_n: float
     empty_hand_after_s: float | None
+    empty_hand_beside_m: float | None
     landing_speed_m_s: float | None
     empty_grip_below_m: float | None
     compliance_caps_pressing: bool

@@ -146,6 +146,7 @@ class InsertTask:
     mpc_z_weight = 1.0
     guard_yield_m_s_per_n = YIELD_M_S_PER_N
     empty_hand_after_s = None
+    empty_hand_beside_m = None
     landing_speed_m_s = None
     empty_grip_below_m = None
     compliance_caps_pressing = False

@@ -42,12 +42,17 @@ OPEN_PAD_INNER_M = 0.0415
 CAPTURE_TOL_M = OPEN_PAD_INNER_M - CUBE_HALF_M - 0.0005
 #: across the fingers' axis a cube whose centre is farther off the TCP than this clears the fingers, m (a cube's
 #: half-width, a finger's half-width of about 1 cm, 4.5 mm to spare)
-CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045
+CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045  # FINGER_HALF_WIDTH_M, below
 #: a closing that has gone on this long with the cube's estimate not between the fingers found nothing, s: the
 #: fingers close at ``grip.GRIPPER_SPEED_M_S`` (0.2 m/s together), 0.175 s from open onto a 4.5 cm cube, and are past
 #: its width by 0.25 s (``mmact_ctrl.control.empty_hand``). Measured on the tuning seeds (6000-6049, hybrid): at the
 #: closing's first tick it took the grasps that start with the cube 2-3 cm off (linear 0.2 m/s: 45 -> 17 picks)
 EMPTY_HAND_AFTER_S = 0.25
+#: a finger's half-width across the fingers' axis, m (the finger geoms on the model; ``CAPTURE_CLEAR_M`` adds 4.5 mm)
+FINGER_HALF_WIDTH_M = 0.010
+#: a cube whose centre is this far off the TCP across the fingers' axis is beside the fingers, not between the pads,
+#: m: a closing whose measured opening can no longer take it in has missed at once (``mmact_ctrl.control.empty_hand``)
+EMPTY_HAND_BESIDE_M = CUBE_HALF_M + FINGER_HALF_WIDTH_M
 #: the speed at which a mode that does not read the cube passes the band, m/s: an open hand landing on a cube at the
 #: TCP's 0.155 m/s peaked at 20 N stiff and 27 N with ``--compliance``, at 0.18 m/s at 27 and 34 N
 #: (``docs/contact/landing_floor.txt``); 0.12 m/s keeps a margin for the tracking's lag
@@ -266,6 +271,9 @@ class PickTask:
     #: into the cube at the grasp height (tuning seeds 6000-6049, hybrid: episodes over 30 N, reversal 6 -> 5, jump
     #: 5 -> 2; picks unchanged on linear 0.2 and 0.4 m/s, reversal and jump)
     empty_hand_after_s = EMPTY_HAND_AFTER_S
+    #: and at once when the fingers' measured opening can no longer take in a cube beside them
+    #: (``StackConfig.empty_hand_beside_m``): see the README (Contact, point 13)
+    empty_hand_beside_m = EMPTY_HAND_BESIDE_M
     #: a mode that does not read the cube passes the band no faster than a landing stays under the contact-force
     #: limit (``StackConfig.landing_speed_m_s``)
     landing_speed_m_s = LANDING_SPEED_M_S

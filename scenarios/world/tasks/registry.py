@@ -40,7 +40,7 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
 def task_guard_settings(task) -> dict:
     """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``,
     ``Task.guard_yield_m_s_per_n`` where it is not the default, ``Task.empty_hand_after_s``,
-    ``Task.landing_speed_m_s``, ``Task.empty_grip_below_m``, ``Task.compliance_caps_pressing``) as ``StackConfig``
+    ``Task.empty_hand_beside_m``, ``Task.landing_speed_m_s``, ``Task.empty_grip_below_m``, ``Task.compliance_caps_pressing``) as ``StackConfig``
     settings; none for a task without them (reach, insert: their stacks as published)."""
     out = {}
     if task.mpc_z_weight != 1.0:
@@ -55,6 +55,8 @@ def task_guard_settings(task) -> dict:
         out["guard_yield_m_s_per_n"] = float(task.guard_yield_m_s_per_n)
     if task.empty_hand_after_s is not None:
         out["empty_hand_after_s"] = float(task.empty_hand_after_s)
+    if getattr(task, "empty_hand_beside_m", None) is not None:
+        out["empty_hand_beside_m"] = float(task.empty_hand_beside_m)
     if task.landing_speed_m_s is not None:
         out["landing_speed_m_s"] = float(task.landing_speed_m_s)
     if task.empty_grip_below_m is not None:
