@@ -19,8 +19,8 @@ from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M
 #: 0.03 m/s once the pads hold the cube; a pad that meets the cube first and is pushed back stops the shrinking too
 #: (the latch's own test then decides, and the measured force over 3 N latches anyway)
 FREE_CLOSING_M_S = 0.1
-#: the opening's free closing speed, m/s (the Franka Hand's 0.1 m/s a finger; the world's
-#: ``scenarios.world.tasks.grip.GRIPPER_SPEED_M_S``)
+#: the opening's free closing speed, m/s (the Franka Hand's 0.1 m/s a finger, as the contact tasks' gripper model
+#: moves them)
 OPENING_CLOSES_M_S = 0.2
 #: fingers measured wider than this are still open (a closing command has not moved them yet), m
 WIDE_OPEN_M = GRIPPER_OPEN_M - 0.002
