@@ -13,6 +13,8 @@
 # governor's reach (open loop unchanged bit for bit: it has no MPC), and again with a held cube kept in hand by the
 # expert and the grasp latch (open loop the same episode for episode); every pick line and pick's fault suite again
 # (stop 54) with the grasp latch waiting for the fingers to be on the cube (open loop the same episode for episode);
+# every pick line (stiff, reflex, compliance) and pick's fault suite again (stop 56)
+# with the empty-hand gate acting on the fingers' measured opening (point 13; open loop the same episode for episode);
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
