@@ -14,14 +14,14 @@ from __future__ import annotations
 
 from mmact_ctrl.control.chunk_stage import GRIPPER_OPEN_M
 
+#: the opening's free closing speed, m/s (the Franka Hand's 0.1 m/s a finger, as the contact tasks' gripper model
+#: moves them)
+OPENING_CLOSES_M_S = 0.2
 #: the opening shrinks faster than this while the fingers close freely, m/s: half the Franka Hand's free closing
 #: speed (0.1 m/s a finger, 0.2 m/s the opening). Measured on the reversal's seed 1024: 0.200 m/s free, under
 #: 0.03 m/s once the pads hold the cube; a pad that meets the cube first and is pushed back stops the shrinking too
 #: (the latch's own test then decides, and the measured force over 3 N latches anyway)
-FREE_CLOSING_M_S = 0.1
-#: the opening's free closing speed, m/s (the Franka Hand's 0.1 m/s a finger, as the contact tasks' gripper model
-#: moves them)
-OPENING_CLOSES_M_S = 0.2
+FREE_CLOSING_M_S = 0.5 * OPENING_CLOSES_M_S
 #: fingers measured wider than this are still open (a closing command has not moved them yet), m
 WIDE_OPEN_M = GRIPPER_OPEN_M - 0.002
 

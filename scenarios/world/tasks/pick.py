@@ -40,16 +40,16 @@ OPEN_PAD_INNER_M = 0.0415
 #: cube 12-18 mm off the axis (the hand lags the cube), so a margin costs picks: 12 mm took 10 of 28 picks on the
 #: reversal, 15 mm 5 of 46 at 0.2 m/s; 18.5 mm 1 of 46 (``mmact_ctrl.control.capture_gate``)
 CAPTURE_TOL_M = OPEN_PAD_INNER_M - CUBE_HALF_M - 0.0005
+#: a finger's half-width across the fingers' axis, m (the finger geoms on the model)
+FINGER_HALF_WIDTH_M = 0.010
 #: across the fingers' axis a cube whose centre is farther off the TCP than this clears the fingers, m (a cube's
-#: half-width, a finger's half-width of about 1 cm, 4.5 mm to spare)
-CAPTURE_CLEAR_M = CUBE_HALF_M + 0.010 + 0.0045  # FINGER_HALF_WIDTH_M, below
+#: half-width, a finger's half-width, 4.5 mm to spare)
+CAPTURE_CLEAR_M = CUBE_HALF_M + FINGER_HALF_WIDTH_M + 0.0045
 #: a closing that has gone on this long with the cube's estimate not between the fingers found nothing, s: the
 #: fingers close at ``grip.GRIPPER_SPEED_M_S`` (0.2 m/s together), 0.175 s from open onto a 4.5 cm cube, and are past
 #: its width by 0.25 s (``mmact_ctrl.control.empty_hand``). Measured on the tuning seeds (6000-6049, hybrid): at the
 #: closing's first tick it took the grasps that start with the cube 2-3 cm off (linear 0.2 m/s: 45 -> 17 picks)
 EMPTY_HAND_AFTER_S = 0.25
-#: a finger's half-width across the fingers' axis, m (the finger geoms on the model; ``CAPTURE_CLEAR_M`` adds 4.5 mm)
-FINGER_HALF_WIDTH_M = 0.010
 #: a cube whose centre is this far off the TCP across the fingers' axis is beside the fingers, not between the pads,
 #: m: a closing whose measured opening can no longer take it in has missed at once (``mmact_ctrl.control.empty_hand``)
 EMPTY_HAND_BESIDE_M = CUBE_HALF_M + FINGER_HALF_WIDTH_M
