@@ -115,6 +115,13 @@ class StackConfig:
             along it, is not capped. False (insert): the force's magnitude is capped, as published.
         close_below_m: the gripper starts closing only with the TCP below this height, m, in every mode
             (``mmact_ctrl.control.closing_gate``); None (reach, insert): the chunk's clock decides.
+        close_below_reading_m: with ``close_below_m``, in a mode that reads the object: the gripper starts closing
+            only with the TCP below this height instead (pick with ``--close-at-grasp``: its grasp height), m; None:
+            ``close_below_m``.
+        close_stops_descent_m: with ``close_below_reading_m``, in a mode that reads the object: once the gripper
+            starts closing, the reference does not go lower than the TCP's height then less this, m, while the
+            gripper is commanded closed (a pad that slides down an object's side wedges it against what it rests on;
+            README, Contact, point 14); None: the descent goes on.
         descent_band_m: (low, high) TCP heights, m, that the reference passes going down at most at
             ``descent_speed_m_s`` in a mode that reads the object, and with it the TCP floor as a braking curve in
             every mode (``mmact_ctrl.control.descent``); None (reach, insert): no such stage.
@@ -165,6 +172,8 @@ class StackConfig:
     compliance: bool = False
     compliance_caps_pressing: bool = False
     close_below_m: float | None = None
+    close_below_reading_m: float | None = None
+    close_stops_descent_m: float | None = None
     descent_band_m: tuple[float, float] | None = None
     descent_speed_m_s: float = 0.05
     landing_speed_m_s: float | None = None
@@ -215,6 +224,13 @@ class StackConfig:
             raise ValueError(f"empty_hand_beside_m must be a distance > 0 m or None, got {self.empty_hand_beside_m}")
         if self.close_below_m is not None and not math.isfinite(self.close_below_m):
             raise ValueError(f"close_below_m must be a finite height in m or None, got {self.close_below_m}")
+        if self.close_below_reading_m is not None and not math.isfinite(self.close_below_reading_m):
+            raise ValueError(f"close_below_reading_m must be a finite height in m or None, got "
+                             f"{self.close_below_reading_m}")
+        if self.close_stops_descent_m is not None and not (math.isfinite(self.close_stops_descent_m)
+                                                           and self.close_stops_descent_m >= 0):
+            raise ValueError(f"close_stops_descent_m must be a distance >= 0 m or None, got "
+                             f"{self.close_stops_descent_m}")
         if self.descent_band_m is not None:
             low, high = (float(z) for z in self.descent_band_m)
             if not (math.isfinite(low) and math.isfinite(high) and high > low >= self.tcp_floor_m):

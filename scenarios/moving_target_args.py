@@ -261,6 +261,11 @@ def _task_args(p: argparse.ArgumentParser) -> None:
     t.add_argument("--grasp-reflex", action="store_true",
                    help="the fast layer keeps the gripper open until the measured object is between the fingers "
                         "and closes it then, whatever the chunk's clock says (default: the chunk's gripper channel)")
+    t.add_argument("--close-at-grasp", action="store_true",
+                   help="pick, in a mode that reads the object: the gripper starts closing only with the TCP down at "
+                        "its grasp height (not 8 mm above it), and the hand stops coming down there while it closes "
+                        "(a pad sliding down the cube's side wedged it against the belt; README, Contact, point 14: "
+                        "fewer episodes over the contact-force limit, fewer picks); default: the closing as published")
     t.add_argument("--compliance", action="store_true",
                    help="in contact (a measured force over 3 N, and 0.1 s after), the TCP tracks its reference as a "
                         "spring-damper whose force is capped at 2/3 of --contact-force-limit-n, in place of stiff "
@@ -351,7 +356,7 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
         mpc_delay_s=None if getattr(args, "mpc_delay_ms", None) is None else args.mpc_delay_ms / 1000.0,
         qp=QPConfig(solver=SolverSettings(max_iter=qp_max_iter(args))),
-        **task_guard_settings(task),
+        **task_guard_settings(task, bool(getattr(args, "close_at_grasp", False))),
     )
 
 

@@ -15,6 +15,7 @@
 # (stop 54) with the grasp latch waiting for the fingers to be on the cube (open loop the same episode for episode);
 # every pick line (stiff, reflex, compliance) and pick's fault suite again (stop 56)
 # with the empty-hand gate acting on the fingers' measured opening (point 13; open loop the same episode for episode);
+# (stop 57: point 14 is a switch, --close-at-grasp, off by default: the published lines stand as they are);
 # insert, its table, the real-time factors and the fault suites: rerun 2026-12-05 after the grip, hold and impedance fixes; the 2-core machine): 50 episodes each on seeds 1000-1049 (never tuned on), the scripted
 # expert (lead velocity), 1 Hz, 200 ms, 6 s episodes, 2 mm sensing noise, 10 % dropout.
 set -e
@@ -52,3 +53,11 @@ python -m scenarios.faults --quick --task insert --out out/faults_insert
 # not part of the tables above (about 25 min on 2 cores)
 # python -m scenarios.moving_target --source expert --episodes 200 --seed 6050 --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid [--filter imm] --json out/fresh_reversal_0.2[_imm].json > fresh_reversal_0.2[_imm].txt
 # python -m scenarios.moving_target --source expert --episodes 200 --seed 6050 --duration-s 6 --task pick --target linear --speed 0.4 --mode open_loop hybrid --json out/fresh_linear_0.4.json > fresh_linear_0.4.txt
+# stop 57: the same on 200 seeds no one had read (6250-6449), the code of point 13 (README, Contact, "Out of sample"; two
+# processes, about 4 min each on 2 cores)
+# for s in 6250 6350; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --json out/fresh_reversal_0.2_$s.json > fresh_reversal_0.2_$s.txt; done
+# stop 57, point 14 (--close-at-grasp: the closing from the grasp height, the descent stopped there): the same reversal row on 6050-6449
+# (the last 200 never read)
+# for s in 6050 6150 6250 6350; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --close-at-grasp --json out/fresh_reversal_0.2_p14_$s.json > fresh_reversal_0.2_p14_$s.txt; done
+# and the published reversal row with it (seeds 1000-1049; open loop has none of it: the same episodes)
+# mt --task pick --target reversal --speed 0.2 --mode open_loop hybrid --close-at-grasp --json out/pick_reversal_0.2_close_at_grasp.json > pick_reversal_0.2_close_at_grasp.txt

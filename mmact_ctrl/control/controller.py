@@ -100,7 +100,7 @@ class HybridController:
         self.compliance = ComplianceGate(CONTACT_LATCH_N, config.dt_s) if config.compliance else None
         self.floor = FloorClamp(config.tcp_floor_m)
         self.reflex = GraspReflex(config.grasp_reflex)
-        self.closing_gate = ClosingGate(config.close_below_m, config.dt_s)
+        self.closing_gate = self._closing_gate(config, layers.reads_target)
         self.descent = None if config.descent_band_m is None else self._descent_governor(config, layers.reads_target)
         self.capture = (CaptureGate(config.capture_tol_m, config.capture_clear_m, config.descent_band_m[1], config.dt_s)
                         if config.capture_tol_m is not None and config.descent_band_m is not None
@@ -124,6 +124,17 @@ class HybridController:
         self._gripper_m = GRIPPER_OPEN_M
         self.executor.bind(ExecutorView(self))
         self._warm_up_qp()
+
+    @staticmethod
+    def _closing_gate(config: StackConfig, reads_target: bool) -> ClosingGate:
+        """The closing gate: where the hand reads the object, from its grasp height and stopping the descent there
+        (``StackConfig.close_below_reading_m``, ``close_stops_descent_m``; README, Contact, point 14); elsewhere from
+        ``close_below_m``, the descent going on."""
+        if config.close_below_m is None:
+            return ClosingGate(None, config.dt_s)
+        if reads_target and config.close_below_reading_m is not None:
+            return ClosingGate(config.close_below_reading_m, config.dt_s, config.close_stops_descent_m)
+        return ClosingGate(config.close_below_m, config.dt_s)
 
     @staticmethod
     def _descent_governor(config: StackConfig, reads_target: bool) -> DescentGovernor:

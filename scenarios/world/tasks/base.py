@@ -23,6 +23,11 @@ class Task(Protocol):
             the top of the task's objects (``StackConfig.descent_band_m``); None: no band.
         close_below_m: the gripper starts closing only with the TCP below this height (``StackConfig.close_below_m``);
             None: the chunk's clock decides.
+        close_below_reading_m: in a mode that reads the object, the gripper starts closing only with the TCP below
+            this height instead (``StackConfig.close_below_reading_m``); None: ``close_below_m``.
+        close_stops_descent_m: with ``close_below_reading_m``, the hand stops coming down once the gripper starts
+            closing, at most this under the TCP's height then (``StackConfig.close_stops_descent_m``), m; None: it
+            goes on.
         capture_tol_m: with a descent band, the hand stays over it while the object is off the fingers' axis by more
             than this, in a mode that reads the object (``StackConfig.capture_tol_m``); None: no such gate.
         capture_clear_m: across the fingers' axis, an object off the TCP by more than this clears the fingers
@@ -53,6 +58,8 @@ class Task(Protocol):
     pull_axes: str
     descent_band_m: tuple[float, float] | None
     close_below_m: float | None
+    close_below_reading_m: float | None
+    close_stops_descent_m: float | None
     capture_tol_m: float | None
     capture_clear_m: float
     mpc_z_weight: float

@@ -30,9 +30,16 @@ FINGERTIP_BELOW_TCP_M = 0.0095
 #: lands on a cube at the approach's 0.25 m/s peaked at 60-110 N (pick at 0.4 m/s, seeds 1001-1015)
 DESCENT_BAND_M = (CUBE_REST_Z_M + CUBE_HALF_M + FINGERTIP_BELOW_TCP_M - 0.003,
                   CUBE_REST_Z_M + CUBE_HALF_M + FINGERTIP_BELOW_TCP_M + 0.004)
-#: the gripper starts closing only with the TCP this close above its grasp height (the expert's: 6 mm above the
-#: cube's centre), m: the fingertips then 2 cm below the cubes' top, the pads on the cube's sides
-CLOSE_BELOW_M = CUBE_REST_Z_M + 0.006 + 0.008
+#: the TCP's grasp height, m: the expert's, 6 mm above a resting cube's centre (``pick_expert.GRASP_ABOVE_CENTRE_M``,
+#: held equal by a test); with ``--close-at-grasp``, in a mode that reads the cube, the gripper starts closing only
+#: with the TCP down there, and the descent stops there (README, Contact, point 14)
+CLOSE_AT_GRASP_M = CUBE_REST_Z_M + 0.006
+#: the gripper starts closing only with the TCP this close above its grasp height, m: the fingertips then 2 cm below
+#: the cubes' top, the pads on the cube's sides
+CLOSE_BELOW_M = CLOSE_AT_GRASP_M + 0.008
+#: once the gripper starts closing (in a mode that reads the cube) the hand comes down no more than this under the
+#: TCP's height then, m (``mmact_ctrl.control.closing_gate``). The one value tried: README, Contact, point 14
+CLOSE_STOPS_DESCENT_M = 0.002
 #: the open fingers' pads' inner faces are this far from the TCP along the fingers' axis, m (measured on the model)
 OPEN_PAD_INNER_M = 0.0415
 #: how far a cube's centre may be off the TCP along the fingers' axis for the open hand to go down over it, m: at 19 mm
@@ -252,6 +259,12 @@ class PickTask:
     descent_band_m = DESCENT_BAND_M
     #: the gripper starts closing only with the TCP within 8 mm of its grasp height (``StackConfig.close_below_m``)
     close_below_m = CLOSE_BELOW_M
+    #: with ``--close-at-grasp``, in a mode that reads the cube: only with the TCP at its grasp height
+    #: (``StackConfig.close_below_reading_m``), and the hand stops coming down once they start closing
+    #: (``StackConfig.close_stops_descent_m``): a pad that slid down the cube's side wedged it against the belt
+    #: (README, Contact, point 14; it costs picks, so it is a switch)
+    close_below_reading_m = CLOSE_AT_GRASP_M
+    close_stops_descent_m = CLOSE_STOPS_DESCENT_M
     #: the open hand goes down past the cubes' top only with the cube within this of the fingers' axis, in a mode
     #: that reads it (``StackConfig.capture_tol_m``)
     capture_tol_m = CAPTURE_TOL_M

@@ -22,6 +22,8 @@ class ReachTask:
     contact = False
     descent_band_m = None
     close_below_m = None
+    close_below_reading_m = None
+    close_stops_descent_m = None
     capture_tol_m = None
     capture_clear_m = 0.0
     mpc_z_weight = 1.0

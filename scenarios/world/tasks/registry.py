@@ -23,9 +23,9 @@ def task_by_name(name: str):
     return getattr(importlib.import_module(module), cls)()
 
 
-def task_stack_settings(name: str, compliance: bool = False) -> dict:
+def task_stack_settings(name: str, compliance: bool = False, close_at_grasp: bool = False) -> dict:
     """The ``StackConfig`` settings a task needs: its TCP floor and the axes a chunk is retargeted on, and
-    ``compliance``; none for reach (its stack is as it always was)."""
+    ``compliance`` and ``close_at_grasp`` (``task_guard_settings``); none for reach (its stack is as it always was)."""
     if name == "reach" and not compliance:
         return {}
     from controllers.retarget import RetargetConfig
@@ -33,12 +33,14 @@ def task_stack_settings(name: str, compliance: bool = False) -> dict:
     task = task_by_name(name)
     box = task_target_box(task)
     return {**({"tcp_floor_m": task.tcp_floor_m} if task.tcp_floor_m is not None else {}),
-            **({"target_box_m": box} if box is not None else {}), **task_guard_settings(task),
+            **({"target_box_m": box} if box is not None else {}), **task_guard_settings(task, close_at_grasp),
             "retarget": RetargetConfig(pull_axes=task.pull_axes), "compliance": bool(compliance)}
 
 
-def task_guard_settings(task) -> dict:
-    """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``, ``Task.mpc_z_weight``,
+def task_guard_settings(task, close_at_grasp: bool = False) -> dict:
+    """The guarded descent a task asks for (``Task.descent_band_m``, ``Task.close_below_m``,
+    ``Task.close_below_reading_m`` and ``Task.close_stops_descent_m`` with ``close_at_grasp`` (``--close-at-grasp``;
+    README, Contact, point 14), ``Task.mpc_z_weight``,
     ``Task.guard_yield_m_s_per_n`` where it is not the default, ``Task.empty_hand_after_s``,
     ``Task.empty_hand_beside_m``, ``Task.landing_speed_m_s``, ``Task.empty_grip_below_m``, ``Task.compliance_caps_pressing``) as ``StackConfig``
     settings; none for a task without them (reach, insert: their stacks as published)."""
@@ -51,6 +53,10 @@ def task_guard_settings(task) -> dict:
         out["descent_band_m"] = tuple(float(z) for z in task.descent_band_m)
     if task.close_below_m is not None:
         out["close_below_m"] = float(task.close_below_m)
+    if close_at_grasp and getattr(task, "close_below_reading_m", None) is not None:
+        out["close_below_reading_m"] = float(task.close_below_reading_m)
+        if getattr(task, "close_stops_descent_m", None) is not None:
+            out["close_stops_descent_m"] = float(task.close_stops_descent_m)
     if task.guard_yield_m_s_per_n != YIELD_M_S_PER_N:
         out["guard_yield_m_s_per_n"] = float(task.guard_yield_m_s_per_n)
     if task.empty_hand_after_s is not None:
