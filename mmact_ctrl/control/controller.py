@@ -127,9 +127,10 @@ class HybridController:
 
     @staticmethod
     def _closing_gate(config: StackConfig, reads_target: bool) -> ClosingGate:
-        """The closing gate: where the hand reads the object, from its grasp height and stopping the descent there
-        (``StackConfig.close_below_reading_m``, ``close_stops_descent_m``; README, Contact, point 14); elsewhere from
-        ``close_below_m``, the descent going on."""
+        """The closing gate: with ``StackConfig.close_below_reading_m`` (pick's ``--close-at-grasp``: its grasp height)
+        and where the hand reads the object, from that height, the descent stopping there
+        (``close_stops_descent_m``; README, Contact, point 14); otherwise from ``close_below_m``, the descent going
+        on (None: the chunk's clock decides)."""
         if config.close_below_m is None:
             return ClosingGate(None, config.dt_s)
         if reads_target and config.close_below_reading_m is not None:
