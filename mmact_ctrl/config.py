@@ -231,6 +231,9 @@ class StackConfig:
                                                            and self.close_stops_descent_m >= 0):
             raise ValueError(f"close_stops_descent_m must be a distance >= 0 m or None, got "
                              f"{self.close_stops_descent_m}")
+        if self.close_stops_descent_m is not None and self.close_below_reading_m is None:
+            raise ValueError(f"close_stops_descent_m ({self.close_stops_descent_m}) acts only with "
+                             f"close_below_reading_m (the closing from the grasp height); got close_below_reading_m None")
         if self.descent_band_m is not None:
             low, high = (float(z) for z in self.descent_band_m)
             if not (math.isfinite(low) and math.isfinite(high) and high > low >= self.tcp_floor_m):

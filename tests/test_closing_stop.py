@@ -67,6 +67,8 @@ def test_the_switch_asks_pick_for_the_stop_and_reach_and_insert_have_none():
     assert stack_config(build_parser().parse_args(["--task", "pick"]), "hybrid").close_below_reading_m is None
     with pytest.raises(ValueError, match="close_stops_descent_m"):
         StackConfig(close_stops_descent_m=-0.001)
+    with pytest.raises(ValueError, match="close_below_reading_m"):  # a stop with no closing height is a misreading
+        StackConfig(close_stops_descent_m=0.002)
     with pytest.raises(ValueError, match="close_below_reading_m"):
         StackConfig(close_below_reading_m=float("nan"))
 

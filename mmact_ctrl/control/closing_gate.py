@@ -67,7 +67,8 @@ class ClosingGate:
         """The reference kept from rising above its height at the closing's start for ``HOLD_S`` after it, and, with
         ``stop_descent_m``, from coming down under the closing's lowest height while the gripper is commanded closed
         (the same arrays when neither acts)."""
-        if self.closing and pos_m[2] < self._stop_z_m:
+        stopped = self.closing and pos_m[2] < self._stop_z_m
+        if stopped:
             self.stopped_ticks += 1
             pos_m, vel_m_s, acc_m_s2 = pos_m.copy(), vel_m_s.copy(), acc_m_s2.copy()
             pos_m[2] = self._stop_z_m
@@ -80,7 +81,8 @@ class ClosingGate:
             self._hold_z_m = float(pos_m[2])
         if pos_m[2] <= self._hold_z_m and vel_m_s[2] <= 0.0 and acc_m_s2[2] <= 0.0:
             return pos_m, vel_m_s, acc_m_s2
-        pos_m, vel_m_s, acc_m_s2 = pos_m.copy(), vel_m_s.copy(), acc_m_s2.copy()
+        if not stopped:  # the stop's copies are already this tick's own
+            pos_m, vel_m_s, acc_m_s2 = pos_m.copy(), vel_m_s.copy(), acc_m_s2.copy()
         pos_m[2] = min(pos_m[2], self._hold_z_m)
         vel_m_s[2] = min(vel_m_s[2], 0.0)
         acc_m_s2[2] = min(acc_m_s2[2], 0.0)
