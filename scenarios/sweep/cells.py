@@ -47,7 +47,7 @@ def _task_stack(cell: dict) -> dict:
         return {}
     from scenarios.world.tasks.registry import task_stack_settings
 
-    return task_stack_settings(task, bool(cell.get("compliance", False)))
+    return task_stack_settings(task, bool(cell.get("compliance", False)), bool(cell.get("close_at_grasp", False)))
 
 
 def run_cell(cell: dict, duration_s: float) -> dict:

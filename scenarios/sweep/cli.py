@@ -9,6 +9,7 @@ import csv
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from mmact_ctrl.executors import make_executor
@@ -42,8 +43,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="local backend: parallel processes")
     p.add_argument("--ray-address", default=None, help="ray backend: cluster address (default: auto)")
     p.add_argument("--grid", metavar="JSON", help="a JSON list of studies ({name, modes, replan_hz, latency_ms, target, "
-                                                  "speed_m_s, bins, seeds[, perception, lead, d_steps, s_steps]}) instead "
-                                                  "of the default grid")
+                                                  "speed_m_s, bins, seeds[, perception, lead, d_steps, s_steps, task, "
+                                                  "clearance_mm, noise_m, compliance, close_at_grasp]}) instead of the "
+                                                  "default grid")
     p.add_argument("--source", type=source_spec_arg, default="expert", metavar="SOURCE",
                    help="chunk source of every cell: expert (the scripted expert, default), policy (the learned policy "
                         "in its training scenes; bins are then its own), module.path:factory or file.py:factory (your "
@@ -62,6 +64,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="the task of the default grid: reach (the studies above), pick (open_loop vs hybrid on the "
                         "conveyor: static, linear 0.2 / 0.4 m/s, reversal, jump) or insert (bins x clearance x noise x "
                         "mode x compliance, static fixture). Default: reach")
+    p.add_argument("--close-at-grasp", action="store_true",
+                   help="pick: every cell with the closing from the grasp height and the descent stopped there (README, "
+                        "Contact, point 14; in the modes that read the cube). For both, off and on, as an axis: "
+                        "\"close_at_grasp\": [false, true] in a --grid study")
     return p
 
 
@@ -104,6 +110,8 @@ def _studies(p: argparse.ArgumentParser, args: argparse.Namespace, duration_s: f
             studies = [Study(**{k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}) for s in spec]
         else:
             studies = task_grid(args.task, args.quick, args.seeds)
+        if args.close_at_grasp:
+            studies = [replace(s, close_at_grasp=(True,)) for s in studies]
         _check_studies(studies, duration_s)
         if not isinstance(spec if args.grid else [], list):
             raise ValueError("--grid must be a JSON list of studies")

@@ -69,12 +69,19 @@ class Study:
     clearance_mm: tuple[float, ...] = (1.0,)
     noise_m: tuple[float, ...] = (0.002,)
     compliance: tuple[bool, ...] = (False,)
+    #: pick's ``--close-at-grasp`` (README, Contact, point 14) off and / or on; another task has no such switch
+    close_at_grasp: tuple[bool, ...] = (False,)
 
     def __post_init__(self) -> None:
-        from scenarios.world.tasks.registry import TASKS
+        from scenarios.world.tasks.registry import TASKS, task_by_name
 
         if self.task not in TASKS:
             raise ValueError(f"study {self.name!r}: unknown task {self.task!r}; expected one of {TASKS}")
+        if not self.close_at_grasp or any(not isinstance(g, bool) for g in self.close_at_grasp):
+            raise ValueError(f"study {self.name!r}: close_at_grasp must be a list of true / false, got "
+                             f"{self.close_at_grasp}")
+        if any(self.close_at_grasp) and getattr(task_by_name(self.task), "close_below_reading_m", None) is None:
+            raise ValueError(f"study {self.name!r}: close_at_grasp is a switch of pick, not of task {self.task!r}")
         if any(not (c > 0 and math.isfinite(c)) for c in self.clearance_mm) or \
                 any(not (n >= 0 and math.isfinite(n)) for n in self.noise_m):
             raise ValueError(f"study {self.name!r}: clearance_mm must be > 0 and noise_m >= 0, got "
@@ -113,8 +120,8 @@ class Study:
             timing = [dict(latency_ms=lat, replan_hz=f, d_steps=None, s_steps=None)
                       for f, lat in product(self.replan_hz, self.latency_ms)]
         contact = [{}] if self.task == "reach" else [
-            dict(task=self.task, clearance_mm=c, noise_m=n, compliance=bool(k))
-            for c, n, k in product(self.clearance_mm, self.noise_m, self.compliance)]
+            dict(task=self.task, clearance_mm=c, noise_m=n, compliance=bool(k), close_at_grasp=bool(g))
+            for c, n, k, g in product(self.clearance_mm, self.noise_m, self.compliance, self.close_at_grasp)]
         return [
             {**base, "mode": m, **tm, "target": tg, "speed_m_s": sp, "bins": b, "seed": sd, "perception": pc, "lead": ld,
              **ct}
@@ -182,6 +189,7 @@ def task_grid(task: str, quick: bool = False, seeds: int = 10) -> list[Study]:
 def cell_key(cell: dict, duration_s: float) -> str:
     text = json.dumps({**{k: cell.get(k) for k in AXES if k not in ("study", "perception")}, "duration_s": duration_s,
                        **({k: cell.get(k) for k in TASK_AXES} if cell.get("task", "reach") != "reach" else {}),
+                       **({"close_at_grasp": True} if cell.get("close_at_grasp") else {}),  # off: the keys as before
                        **({"perception": cell["perception"]} if cell.get("perception", "oracle") != "oracle" else {}),
                        **({"source": cell["source"], "checkpoint": cell.get("checkpoint")}
                           if cell.get("source", "expert") != "expert" else {}),

@@ -25,11 +25,11 @@ ORDERS = {
 }
 # the axes that define a condition (with study and mode); episodes of one condition differ by seed only
 COND_AXES = ("source", "lead", "target", "speed_m_s", "replan_hz", "latency_ms", "d_steps", "s_steps", "bins",
-             "perception", "task", "clearance_mm", "noise_m", "compliance")
+             "perception", "task", "clearance_mm", "noise_m", "compliance", "close_at_grasp")
 HEAD = {"source": "source", "lead": "lead", "target": "target", "speed_m_s": "speed [m/s]", "replan_hz": "replan [Hz]",
         "latency_ms": "latency [ms]", "d_steps": "d [steps]", "s_steps": "s [steps]", "bins": "bins",
         "perception": "perception", "task": "task", "clearance_mm": "clearance [mm]", "noise_m": "noise [m]",
-        "compliance": "compliance"}
+        "compliance": "compliance", "close_at_grasp": "close at grasp"}
 UNIT = {"speed_m_s": " m/s", "replan_hz": " Hz", "latency_ms": " ms", "clearance_mm": " mm", "noise_m": " m"}
 PREFIX = {"lead": "lead ", "d_steps": "d=", "s_steps": "s=", "bins": "bins="}
 # study -> (section title, the axes its table rows are indexed by; any other axis that varies is appended)
