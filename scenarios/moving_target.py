@@ -27,7 +27,7 @@ from policy.checkpoint import CheckpointError
 from mmact_ctrl.executors import make_executor
 from mmact_ctrl.sources.contract import require_capabilities
 from scenarios.moving_target_args import (DEFAULT_SOURCE, MAX_REPLAN_HZ, MAX_SPEED_M_S, PER_TICK_KEYS, PROG,  # noqa: F401
-                                          build_parser,
+                                          build_parser, filter_accel_setting,
                                           mpc_phase_ms, perception_hz, perception_latency_ms, qp_max_iter, stack_config)
 from scenarios.sources import build_source, close_source, connect_check, scene_settings, settings_from_args
 from scenarios.world.factory import make_world
@@ -85,6 +85,7 @@ def check_modes_of_running(args: argparse.Namespace) -> None:
         for mode in args.mode:
             if not make_executor(mode).layers.reads_target:
                 raise ValueError(reflex_refusal(mode))
+    filter_accel_setting(args)  # --filter-accel-m-s2 with a model that has no such noise: one line, before any work
     if getattr(args, "mpc_delay_ms", None) is not None:
         if args.realtime:
             raise ValueError("--mpc-delay-ms is for simulated time: --realtime solves the MPC in its own process already")

@@ -242,6 +242,11 @@ def _world_args(p: argparse.ArgumentParser) -> None:
                         "interacting multiple model of both (follows curving and accelerating targets), ct a "
                         "coordinated turn (constant speed and turn rate about the vertical), imm-ct an interacting "
                         "multiple model of cv, ca and ct (predicts along a circle: the best for curving targets)")
+    w.add_argument("--filter-accel-m-s2", type=_number(float, "--filter-accel-m-s2", 0, False), default=None,
+                   metavar="A",
+                   help="--filter cv: the standard deviation of its white (piecewise-constant) acceleration, m/s^2 "
+                        "(default: EstimatorConfig's 2.0). Larger follows a carrier's flip sooner and a steady course "
+                        "more noisily (README, Contact, 'Out of sample again': pick's reversal at 5)")
     w.add_argument("--episodes", type=_number(int, "--episodes", 1), default=10, help="episodes per mode")
     w.add_argument("--duration-s", type=_number(float, "--duration-s", 0, False), default=6.0, help="episode length (s)")
     w.add_argument("--seed", type=_number(int, "--seed", 0), default=0, help="seed of the first episode (episode i uses seed+i)")
@@ -351,7 +356,8 @@ def stack_config(args: argparse.Namespace, mode: str) -> StackConfig:
         residual_checkpoint=args.residual_checkpoint or "",
         perception_hz=perception_hz(args),
         # a noise-free oracle repeats itself legitimately: the frozen gate is for real (noisy) sensors
-        filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0),
+        filter=EstimatorConfig(model=args.filter, frozen_gate=args.perception == "camera" or args.noise_m > 0,
+                               **filter_accel_setting(args)),
         # real time: the MPC's 50 Hz work off the 100 Hz fusion's ticks (StackConfig.mpc_phase_s)
         mpc_phase_s=mpc_phase_ms(args) / 1000.0,
         mpc_delay_s=None if getattr(args, "mpc_delay_ms", None) is None else args.mpc_delay_ms / 1000.0,
@@ -380,6 +386,17 @@ def perception_hz(args: argparse.Namespace) -> float:
     if args.perception_hz is not None:
         return float(args.perception_hz)
     return 30.0 if args.perception == "camera" else 100.0
+
+
+def filter_accel_setting(args: argparse.Namespace) -> dict:
+    """``--filter-accel-m-s2`` as an ``EstimatorConfig`` setting (none: the config's default); a model other than
+    cv, which has no such noise, is a one-line error naming both switches."""
+    accel = getattr(args, "filter_accel_m_s2", None)
+    if accel is None:
+        return {}
+    if args.filter != "cv":
+        raise ValueError(f"--filter-accel-m-s2 sets the cv model's noise; --filter {args.filter} has none")
+    return {"accel_noise_m_s2": float(accel)}
 
 
 def perception_latency_ms(args: argparse.Namespace) -> float:

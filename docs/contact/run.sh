@@ -61,3 +61,14 @@ python -m scenarios.faults --quick --task insert --out out/faults_insert
 # for s in 6050 6150 6250 6350; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --close-at-grasp --json out/fresh_reversal_0.2_p14_$s.json > fresh_reversal_0.2_p14_$s.txt; done
 # and the published reversal row with it (seeds 1000-1049; open loop has none of it: the same episodes)
 # mt --task pick --target reversal --speed 0.2 --mode open_loop hybrid --close-at-grasp --json out/pick_reversal_0.2_close_at_grasp.json > pick_reversal_0.2_close_at_grasp.txt
+# stop 58: the same reversal row on 200 more seeds no one had read (6450-6649), the default and --close-at-grasp
+# (README, Contact, "Out of sample again"; four processes, about 16 min on 2 cores)
+# for s in 6450 6550; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --json out/fresh_reversal_0.2_$s.json > fresh_reversal_0.2_$s.txt; done
+# for s in 6450 6550; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --close-at-grasp --json out/fresh_reversal_0.2_p14_$s.json > fresh_reversal_0.2_p14_$s.txt; done
+# stop 58: --filter-accel-m-s2 5 (the cv filter's white acceleration; a switch) on the same fresh seeds, beside the
+# default (linear 0.4 and jump on 6450-6549), and on the published linear 0.2 and reversal rows (hybrid)
+# for s in 6450 6550; do python -m scenarios.moving_target --source expert --episodes 100 --seed $s --duration-s 6 --task pick --target reversal --speed 0.2 --mode hybrid --filter-accel-m-s2 5 --json out/fresh_reversal_0.2_q5_$s.json > fresh_reversal_0.2_q5_$s.txt; done
+# for t in "linear 0.4" "jump 0.2"; do set -- $t; for q in "" "--filter-accel-m-s2 5"; do python -m scenarios.moving_target --source expert --episodes 100 --seed 6450 --duration-s 6 --task pick --target $1 --speed $2 --mode hybrid $q ...; done; done
+#   (outputs fresh_linear_0.4_6450.txt, fresh_linear_0.4_q5_6450.txt, fresh_jump_0.2_6450.txt, fresh_jump_0.2_q5_6450.txt)
+# mt --task pick --target linear --speed 0.2 --mode hybrid --filter-accel-m-s2 5 --json out/pick_linear_0.2_q5.json > pick_linear_0.2_filter_accel_5.txt
+# mt --task pick --target reversal --speed 0.2 --mode hybrid --filter-accel-m-s2 5 --json out/pick_reversal_0.2_q5.json > pick_reversal_0.2_filter_accel_5.txt
