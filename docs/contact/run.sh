@@ -72,3 +72,5 @@ python -m scenarios.faults --quick --task insert --out out/faults_insert
 #   (outputs fresh_linear_0.4_6450.txt, fresh_linear_0.4_q5_6450.txt, fresh_jump_0.2_6450.txt, fresh_jump_0.2_q5_6450.txt)
 # mt --task pick --target linear --speed 0.2 --mode hybrid --filter-accel-m-s2 5 --json out/pick_linear_0.2_q5.json > pick_linear_0.2_filter_accel_5.txt
 # mt --task pick --target reversal --speed 0.2 --mode hybrid --filter-accel-m-s2 5 --json out/pick_reversal_0.2_q5.json > pick_reversal_0.2_filter_accel_5.txt
+# and every other published hybrid pick row with it (stiff, --grasp-reflex, --compliance; hybrid only), e.g.
+# mt --task pick --target jump --speed 0.2 --mode hybrid --grasp-reflex --filter-accel-m-s2 5 --json out/q.json > pick_jump_0.2_reflex_filter_accel_5.txt
